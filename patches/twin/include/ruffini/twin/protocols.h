@@ -1,0 +1,76 @@
+#pragma once
+// Indentation protocols: reproducible functions of (scene, seed) that drive the twin and stream frames.
+//
+// paper: 2700 force-controlled indentations at uniform random positions over the indented area, the 11 mm
+//   probe moving at constant speed (0.28 mm/s) from about 1.04 mm above the surface until the force reaches
+//   2.5 N (only the increasing-load phase is kept), 100 Hz, force following the sphere-on-bonded-layer law;
+//   the force label is the load cell's reading (noise, 1/256 N steps). About 1000 frames an indentation,
+//   37 % of them before contact. A rest period first gives decoders an untouched baseline.
+// vonfrey: the paper's sensitivity test: 8 filaments (0.4 g to 60 g) x subjects x sites at random positions,
+//   each a short ramp, a hold at the filament's buckling force and a release.
+// receptive-field: a grid scan with the probe, each site ramped to 2.5 N, for hot-spot maps.
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "ruffini/dataset/dataset.h"
+#include "ruffini/twin/scene.h"
+#include "ruffini/twin/twin.h"
+
+namespace ruffini::twin {
+
+struct PaperProtocol {
+  int indentations = 2700;
+  double rate_hz = 100.0;
+  double max_force_n = 2.5;
+  double speed_mm_s = 0.28;
+  double approach_mm = 1.04;      // mean gap between probe and skin when a recording starts
+  double approach_jitter = 0.15;  // relative, uniform
+  int rest_frames = 200;
+};
+
+struct VonFreyProtocol {
+  std::vector<double> filaments_g = {0.4, 0.6, 1.0, 2.0, 4.0, 10.0, 26.0, 60.0};
+  int subjects = 12;
+  int sites = 20;                 // per subject and filament
+  double tip_radius_mm = 0.25;    // point-like load
+  double rate_hz = 100.0;
+  int rest_frames = 30, ramp_frames = 10, hold_frames = 50, release_frames = 10;
+  // Sites: uniform over the indented area, or (if > 0) within this distance of a random grating centre.
+  double near_grating_mm = 0.0;
+};
+
+struct ReceptiveFieldProtocol {
+  double step_mm = 2.0;           // grid step in Y and in arc length
+  double max_force_n = 2.5;
+  int ramp_frames = 50;
+  double rate_hz = 100.0;
+};
+
+// Receives frames in blocks; must copy what it keeps.
+using FrameSink = std::function<void(std::span<const dataset::Frame>)>;
+// Called now and then with (done, total) units of work (indentations, stimulations, sites).
+using ProgressFn = std::function<void(std::uint64_t, std::uint64_t)>;
+
+struct ProtocolRun {
+  std::uint64_t frames = 0;
+  int indentations = 0;
+};
+
+ProtocolRun RunPaper(const SkinTwin& twin, const Scene& scene, const PaperProtocol& p, std::uint64_t seed,
+                     const FrameSink& sink, const ProgressFn& progress = {});
+ProtocolRun RunVonFrey(const SkinTwin& twin, const VonFreyProtocol& p, std::uint64_t seed, const FrameSink& sink,
+                       const ProgressFn& progress = {});
+ProtocolRun RunReceptiveField(const SkinTwin& twin, const Scene& scene, const ReceptiveFieldProtocol& p,
+                              std::uint64_t seed, const FrameSink& sink, const ProgressFn& progress = {});
+
+// Newtons for a von Frey filament's nominal grams.
+inline double GramsToNewtons(double g) { return g * 9.80665e-3; }
+
+// Dataset header for a twin run: sample rate, provenance and the cast's reference wavelengths.
+dataset::DatasetInfo TwinDatasetInfo(const SkinTwin& twin, const Scene& scene, const std::string& protocol,
+                                     std::uint64_t seed, double rate_hz);
+
+}  // namespace ruffini::twin

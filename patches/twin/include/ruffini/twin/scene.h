@@ -1,0 +1,45 @@
+#pragma once
+// A scene names what exists: the patches (and, later, the robot, mounts and safety zones) and the effects
+// the twin must model. Only what a scene names is built.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "ruffini/patch/spec.h"
+#include "ruffini/twin/contact.h"
+#include "ruffini/twin/effects.h"
+
+namespace ruffini::twin {
+
+struct ScenePatch {
+  std::string name;
+  std::string spec_path;
+  patch::PatchSpec spec;
+};
+
+// The indentation rig's force sensor (the paper's ATI Nano-43: 1/256 N resolution).
+struct LoadCell {
+  double noise_n = 0.02;
+  double resolution_n = 1.0 / 256.0;
+};
+
+struct Scene {
+  std::string name;
+  std::string source;  // file it came from
+  std::vector<ScenePatch> patches;
+  Probe probe;         // the indentation probe
+  LoadCell load_cell;
+  TwinEffects effects;
+
+  // The one patch a single-patch command works on: the named one, or the only one. Throws InputError.
+  [[nodiscard]] const ScenePatch& Patch(const std::string& patch_name = "") const;
+};
+
+// Loads and validates; patch spec paths are relative to the scene file. Throws InputError with
+// file:line:col, the key and what was expected.
+Scene LoadScene(const std::string& path);
+
+// Applies a --skin-sample override: sets the skin sample seed, turning the effect on if the scene had it off.
+void OverrideSkinSample(Scene& scene, std::uint64_t seed);
+
+}  // namespace ruffini::twin

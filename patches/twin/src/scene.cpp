@@ -1,0 +1,139 @@
+#include "ruffini/twin/scene.h"
+
+#include <filesystem>
+
+#include "ruffini/error.h"
+#include "ruffini/patch/spec_loader.h"
+#include "ruffini/yaml_reader.h"
+
+namespace ruffini::twin {
+namespace {
+
+constexpr double kBig = 1e9;
+constexpr long kGratingMax = static_cast<long>(patch::kGratings);
+
+TwinEffects ReadEffects(YamlReader& e) {
+  TwinEffects out;
+  if (auto n = e.MapOr("noise")) {
+    out.noise = NoiseEffect{n->NumberOr("sigma_pm", 0.3, 0.0, 100.0)};
+    n->Finish();
+  }
+  if (auto g = e.MapOr("gain_spread")) {
+    out.gain_spread = GainSpreadEffect{g->NumberOr("sigma", 0.07, 0.0, 0.5)};
+    g->Finish();
+  }
+  if (e.Has("irregular_gratings")) {
+    IrregularEffect ir;
+    for (YamlReader& g : e.Sequence("irregular_gratings")) {
+      IrregularGrating ig;
+      ig.grating = static_cast<int>(g.Integer("grating", 1, kGratingMax));
+      for (YamlReader& l : g.Sequence("lobes")) {
+        Lobe lobe;
+        lobe.along_mm = l.Number("along_mm", -40.0, 40.0);
+        lobe.across_mm = l.Number("across_mm", -40.0, 40.0);
+        lobe.gain = l.Number("gain", 0.0, 5.0);
+        l.Finish();
+        ig.lobes.push_back(lobe);
+      }
+      if (ig.lobes.empty()) g.Fail("lobes", "must list at least one lobe");
+      g.Finish();
+      ir.gratings.push_back(ig);
+    }
+    out.irregular = ir;
+  }
+  if (auto s = e.MapOr("stiffening")) {
+    out.stiffening = StiffeningEffect{};
+    s->Finish();
+  }
+  if (auto t = e.MapOr("temperature")) {
+    TemperatureEffect te;
+    te.offset_c = t->NumberOr("offset_c", 0.0, -100.0, 100.0);
+    te.amplitude_c = t->NumberOr("amplitude_c", 0.0, 0.0, 100.0);
+    te.period_s = t->NumberOr("period_s", 600.0, 1e-3, kBig);
+    te.ramp_c_per_s = t->NumberOr("ramp_c_per_s", 0.0, -10.0, 10.0);
+    te.coefficient_pm_per_c = t->NumberOr("coefficient_pm_per_c", 10.0, 0.0, 100.0);
+    te.spread = t->NumberOr("spread", 0.03, 0.0, 0.5);
+    t->Finish();
+    out.temperature = te;
+  }
+  if (e.Has("faults")) {
+    for (YamlReader& f : e.Sequence("faults")) {
+      FaultEffect fe;
+      fe.grating = static_cast<int>(f.Integer("grating", 1, kGratingMax));
+      fe.kind = f.Choice("kind", {"dead", "dimmed"}) == "dead" ? FaultEffect::Kind::kDead : FaultEffect::Kind::kDimmed;
+      fe.dropout = f.NumberOr("dropout", fe.kind == FaultEffect::Kind::kDimmed ? 0.2 : 0.0, 0.0, 1.0);
+      fe.noise_factor = f.NumberOr("noise_factor", fe.kind == FaultEffect::Kind::kDimmed ? 4.0 : 1.0, 1.0, 1000.0);
+      f.Finish();
+      out.faults.push_back(fe);
+    }
+  }
+  if (auto s = e.MapOr("skin_sample")) {
+    SkinSampleEffect ss;
+    ss.seed = static_cast<std::uint64_t>(s->IntegerOr("seed", 0, 0, 1L << 40));
+    ss.position_mm = s->NumberOr("position_mm", 1.0, 0.0, 10.0);
+    ss.thickness_sigma = s->NumberOr("thickness_sigma", 0.03, 0.0, 0.2);
+    ss.wavelength_nm = s->NumberOr("wavelength_nm", 0.05, 0.0, 0.5);
+    s->Finish();
+    out.skin_sample = ss;
+  }
+  e.Finish();
+  return out;
+}
+
+}  // namespace
+
+const ScenePatch& Scene::Patch(const std::string& patch_name) const {
+  if (patch_name.empty()) {
+    if (patches.size() == 1) return patches[0];
+    throw InputError(source + ": the scene has " + std::to_string(patches.size()) +
+                     " patches; name one with --patch");
+  }
+  for (const auto& p : patches) {
+    if (p.name == patch_name) return p;
+  }
+  throw InputError(source + ": no patch named '" + patch_name + "' in the scene");
+}
+
+Scene LoadScene(const std::string& path) {
+  YamlReader root = YamlReader::LoadFile(path);
+  Scene s;
+  s.source = path;
+  s.name = root.String("name");
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  for (YamlReader& p : root.Sequence("patches")) {
+    ScenePatch sp;
+    sp.name = p.String("name");
+    sp.spec_path = (dir / p.String("spec")).lexically_normal().string();
+    if (!std::filesystem::exists(sp.spec_path)) p.Fail("spec", "names a file that does not exist (" + sp.spec_path + ")");
+    p.Finish();
+    sp.spec = patch::LoadPatchSpec(sp.spec_path);
+    for (const auto& other : s.patches) {
+      if (other.name == sp.name) p.Fail("name", "is used by two patches; patch names must be unique");
+    }
+    s.patches.push_back(std::move(sp));
+  }
+  if (s.patches.empty()) root.Fail("patches", "must list at least one patch");
+  if (auto t = root.MapOr("twin")) {
+    if (auto pr = t->MapOr("probe")) {
+      s.probe.shape = pr->Choice("shape", {"sphere", "point"}) == "sphere" ? Probe::Shape::kSphere : Probe::Shape::kPoint;
+      s.probe.radius_mm = pr->Number("radius_mm", 0.01, 50.0);
+      pr->Finish();
+    }
+    if (auto lc = t->MapOr("load_cell")) {
+      s.load_cell.noise_n = lc->NumberOr("noise_n", s.load_cell.noise_n, 0.0, 10.0);
+      s.load_cell.resolution_n = lc->NumberOr("resolution_n", s.load_cell.resolution_n, 0.0, 1.0);
+      lc->Finish();
+    }
+    if (auto e = t->MapOr("effects")) s.effects = ReadEffects(*e);
+    t->Finish();
+  }
+  root.Finish();
+  return s;
+}
+
+void OverrideSkinSample(Scene& scene, std::uint64_t seed) {
+  if (!scene.effects.skin_sample) scene.effects.skin_sample = SkinSampleEffect{};
+  scene.effects.skin_sample->seed = seed;
+}
+
+}  // namespace ruffini::twin

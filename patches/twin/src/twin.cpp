@@ -1,0 +1,294 @@
+#include "ruffini/twin/twin.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <tuple>
+
+#include "ruffini/error.h"
+#include "ruffini/twin/layer.h"
+
+namespace ruffini::twin {
+
+std::uint64_t DeriveSeed(std::uint64_t seed, std::uint64_t stream) noexcept {
+  std::uint64_t z = seed + 0x9E3779B97F4A7C15ull * (stream + 1);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+// Grating-averaged axial strain per newton, K_a(u, v), on a grid of contact radii a.
+class KernelTables {
+ public:
+  static constexpr double kStepMm = 0.25;      // u, v grid step
+  static constexpr double kExtentMm = 40.0;    // |u|, |v| beyond this: no response
+  static constexpr double kRadiusStepMm = 0.5;
+  static constexpr int kRadii = 13;            // 0 .. 6 mm
+  static constexpr int kN = static_cast<int>(kExtentMm / kStepMm) + 1;
+
+  KernelTables(const LayerParams& layer, double grating_length_mm) {
+    std::vector<double> radii;
+    for (int i = 0; i < kRadii; ++i) radii.push_back(i * kRadiusStepMm);
+    const double half = grating_length_mm / 2.0;
+    const double r_max = std::hypot(kExtentMm + half, kExtentMm) + 1.0;
+    const std::vector<StrainProfile> prof = ComputeStrainProfiles(layer, radii, r_max, 0.1);
+    const int ns = 33;  // samples along the grating (trapezoid over [-L/2, L/2])
+    table_.assign(static_cast<std::size_t>(kRadii) * kN * kN, 0.0f);
+    for (int a = 0; a < kRadii; ++a) {
+      const StrainProfile& p = prof[static_cast<std::size_t>(a)];
+      for (int iu = 0; iu < kN; ++iu) {
+        for (int iv = 0; iv < kN; ++iv) {
+          const double u = iu * kStepMm, v = iv * kStepMm;
+          double acc = 0.0;
+          for (int k = 0; k < ns; ++k) {
+            const double x = u - half + grating_length_mm * k / (ns - 1);
+            const double rho2 = x * x + v * v;
+            const double rho = std::sqrt(rho2);
+            const double e = rho2 < 1e-12 ? p.Rr(0.0) : (p.Rr(rho) * x * x + p.Tt(rho) * v * v) / rho2;
+            acc += (k == 0 || k == ns - 1) ? 0.5 * e : e;
+          }
+          table_[Index(a, iu, iv)] = static_cast<float>(acc / (ns - 1));
+        }
+      }
+    }
+  }
+
+  // Bilinear in (u, v), linear in the contact radius. Real-time safe.
+  [[nodiscard]] double Lookup(double radius_mm, double u, double v) const noexcept {
+    u = std::abs(u);
+    v = std::abs(v);
+    if (u >= kExtentMm || v >= kExtentMm) return 0.0;
+    const double ra = std::clamp(radius_mm / kRadiusStepMm, 0.0, static_cast<double>(kRadii - 1) - 1e-9);
+    const int a = static_cast<int>(ra);
+    const double wa = ra - a;
+    const double xu = u / kStepMm, xv = v / kStepMm;
+    const int iu = static_cast<int>(xu), iv = static_cast<int>(xv);
+    const double wu = xu - iu, wv = xv - iv;
+    auto at = [&](int aa) {
+      const float* t = &table_[Index(aa, iu, iv)];
+      return (1 - wu) * ((1 - wv) * t[0] + wv * t[1]) + wu * ((1 - wv) * t[kN] + wv * t[kN + 1]);
+    };
+    return (1 - wa) * at(a) + (wa > 0 ? wa * at(a + 1) : 0.0);
+  }
+
+ private:
+  static std::size_t Index(int a, int iu, int iv) {
+    return (static_cast<std::size_t>(a) * kN + static_cast<std::size_t>(iu)) * kN + static_cast<std::size_t>(iv);
+  }
+  std::vector<float> table_;
+};
+
+namespace {
+
+// Tables depend only on the layer and the grating length: share them between twins (tests build many).
+std::shared_ptr<const KernelTables> CachedTables(const LayerParams& l, double length_mm) {
+  static std::mutex mu;
+  static std::map<std::tuple<double, double, double, double, double>, std::shared_ptr<const KernelTables>> cache;
+  const auto key = std::make_tuple(l.thickness_mm, l.depth_mm, l.youngs_modulus_kpa, l.poisson_ratio, length_mm);
+  std::lock_guard<std::mutex> lock(mu);
+  auto it = cache.find(key);
+  if (it != cache.end()) return it->second;
+  auto t = std::make_shared<const KernelTables>(l, length_mm);
+  cache.emplace(key, t);
+  return t;
+}
+
+void CheckGrating(int g, const char* what) {
+  if (g < 1 || g > static_cast<int>(patch::kGratings)) {
+    throw InputError(std::string("twin effect '") + what + "' names grating " + std::to_string(g) +
+                     "; gratings are numbered 1.." + std::to_string(patch::kGratings));
+  }
+}
+
+}  // namespace
+
+SkinTwin::~SkinTwin() = default;
+SkinTwin::SkinTwin(SkinTwin&&) noexcept = default;
+
+SkinTwin::SkinTwin(const patch::PatchSpec& spec, const TwinEffects& effects, std::vector<double> sphere_radii)
+    : spec_(spec), effects_(effects), geometry_(spec), thickness_mm_(spec.layer.thickness_mm),
+      depth_radius_mm_(spec.surface_radius_mm - spec.layer.fibre_depth_mm) {
+  // Fabrication draws come from the skin sample seed, in a fixed order.
+  std::mt19937_64 fab(DeriveSeed(effects.fabrication_seed(), 100));
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  for (std::size_t i = 0; i < patch::kGratings; ++i) {
+    const double n_gain = normal(fab), n_temp = normal(fab);
+    const double u_pos_r = uniform(fab), u_pos_a = uniform(fab), u_wl = uniform(fab);
+    gain_[i] = effects.gain_spread ? std::max(0.2, 1.0 + effects.gain_spread->sigma * n_gain) : 1.0;
+    temp_coeff_[i] = effects.temperature
+                         ? effects.temperature->coefficient_pm_per_c * (1.0 + effects.temperature->spread * n_temp)
+                         : 0.0;
+    centres_[i] = spec.gratings[i].centre;
+    reference_nm_[i] = spec.gratings[i].wavelength_nm;
+    if (effects.skin_sample) {
+      const auto& s = *effects.skin_sample;
+      const double rad = s.position_mm * std::sqrt(u_pos_r), ang = 2.0 * std::numbers::pi * u_pos_a;
+      centres_[i].y_mm += rad * std::cos(ang);
+      centres_[i].r_deg += geometry_.RDeg(rad * std::sin(ang));
+      reference_nm_[i] += s.wavelength_nm * (2.0 * u_wl - 1.0);
+    }
+  }
+  if (effects.skin_sample) {
+    const double n = std::clamp(normal(fab), -3.0, 3.0);
+    thickness_mm_ *= 1.0 + effects.skin_sample->thickness_sigma * n;
+  }
+
+  LayerParams layer{thickness_mm_, spec.layer.fibre_depth_mm, spec.layer.material.youngs_modulus_kpa,
+                    spec.layer.material.poisson_ratio};
+  tables_ = CachedTables(layer, spec.gratings[0].length_mm);
+  for (double r : sphere_radii) {
+    law_radii_mm_.push_back(r);
+    laws_.emplace_back(thickness_mm_, spec.layer.material.youngs_modulus_kpa, spec.layer.material.poisson_ratio, r);
+  }
+
+  const double pm_per_strain = spec.fibre.strain_optic_pm_per_microstrain * 1e6;
+  for (std::size_t i = 0; i < patch::kGratings; ++i) {
+    const double th = spec.gratings[i].direction_deg * patch::kDegToRad;
+    const double c = std::cos(th), s = std::sin(th);
+    std::vector<Lobe> lobes{Lobe{}};
+    if (effects.irregular) {
+      for (const auto& ig : effects.irregular->gratings) {
+        if (ig.grating == static_cast<int>(i) + 1) lobes = ig.lobes;
+      }
+    }
+    for (const Lobe& l : lobes) {
+      const double dy = l.along_mm * c - l.across_mm * s;
+      const double darc = l.along_mm * s + l.across_mm * c;  // at the fibre depth
+      lobes_[i].push_back(LobeGeo{centres_[i].y_mm + dy, centres_[i].r_deg * patch::kDegToRad + darc / depth_radius_mm_,
+                                  c, s, gain_[i] * l.gain * spec.fibre.strain_transfer * pm_per_strain});
+    }
+  }
+  if (effects.irregular) {
+    for (const auto& ig : effects.irregular->gratings) CheckGrating(ig.grating, "irregular_gratings");
+  }
+  for (const auto& f : effects.faults) CheckGrating(f.grating, "faults");
+}
+
+const ContactLaw* SkinTwin::contact_law(const Probe& p) const noexcept {
+  for (std::size_t i = 0; i < laws_.size(); ++i) {
+    if (std::abs(law_radii_mm_[i] - p.radius_mm) < 1e-9) return &laws_[i];
+  }
+  return nullptr;
+}
+
+double SkinTwin::StiffeningFactor(double depth_mm) const noexcept {
+  // Yeoh secant shear modulus at the nominal compression under the probe, relative to the small-strain
+  // modulus: strain at the fibre scales with 1 / modulus.
+  const auto& m = spec_.layer.material;
+  const double lambda = 1.0 - std::min(depth_mm / thickness_mm_, 0.9);
+  const double i1 = lambda * lambda + 2.0 / lambda - 3.0;
+  const double c1 = m.yeoh_c1_kpa * 1e3, c2 = m.yeoh_c2_pa, c3 = m.yeoh_c3_pa;
+  const double mu = c1 + 2.0 * c2 * i1 + 3.0 * c3 * i1 * i1;
+  return mu > 0 ? c1 / mu : 1.0;
+}
+
+void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, std::uint32_t& flags) const noexcept {
+  out.fill(0.0);
+  const patch::Region extent = spec_.Extent();
+  for (const Contact& c : contacts) {
+    if (!std::isfinite(c.force_n) || c.force_n < 0.0 || !std::isfinite(c.at.y_mm) || !std::isfinite(c.at.r_deg)) {
+      flags |= kBadContact;
+      continue;
+    }
+    if (!extent.Contains(c.at)) {
+      flags |= kOffPatch;
+      continue;
+    }
+    if (c.force_n == 0.0) continue;
+    double radius = c.probe.radius_mm;
+    double depth = 0.0;
+    if (c.probe.shape == Probe::Shape::kSphere) {
+      const ContactLaw* law = contact_law(c.probe);
+      if (law == nullptr) {
+        flags |= kBadContact;
+        continue;
+      }
+      depth = law->DepthMm(c.force_n);
+      radius = std::min(c.probe.radius_mm, std::sqrt(c.probe.radius_mm * depth));
+      if (depth >= law->max_depth_mm()) flags |= kSaturated;  // layer crushed: beyond the model
+    }
+    const double f = c.force_n * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
+    const double cr = c.at.r_deg * patch::kDegToRad;
+    for (std::size_t i = 0; i < patch::kGratings; ++i) {
+      double acc = 0.0;
+      for (const LobeGeo& l : lobes_[i]) {
+        const double dy = l.y_mm - c.at.y_mm;
+        const double darc = depth_radius_mm_ * (l.r_rad - cr);
+        const double u = dy * l.cos_d + darc * l.sin_d;
+        const double v = -dy * l.sin_d + darc * l.cos_d;
+        acc += l.scale * tables_->Lookup(radius, u, v);
+      }
+      out[i] += f * acc;
+    }
+  }
+}
+
+Shifts SkinTwin::StrainShiftsPm(const Contact& c) const noexcept {
+  Shifts s{};
+  std::uint32_t flags = 0;
+  StrainShiftsPm(std::span<const Contact>(&c, 1), s, flags);
+  return s;
+}
+
+InterrogatorSim::InterrogatorSim(const SkinTwin& twin, std::uint64_t seed)
+    : twin_(twin), rng_(DeriveSeed(seed, 7)) {
+  const TwinEffects& e = twin.effects();
+  const double sigma = e.noise ? e.noise->sigma_pm : 0.0;
+  noise_pm_.fill(sigma);
+  for (const FaultEffect& f : e.faults) {
+    const auto i = static_cast<std::size_t>(f.grating - 1);
+    if (f.kind == FaultEffect::Kind::kDead) {
+      dead_[i] = true;
+    } else {
+      dropout_[i] = f.dropout;
+      noise_pm_[i] = sigma * f.noise_factor;
+    }
+  }
+}
+
+double InterrogatorSim::TemperatureC(double t) const noexcept {
+  const auto& te = twin_.effects().temperature;
+  if (!te) return 0.0;
+  return te->offset_c + te->amplitude_c * std::sin(2.0 * std::numbers::pi * t / te->period_s) + te->ramp_c_per_s * t;
+}
+
+void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, patch::kGratings>& wl,
+                           std::uint32_t& flags) noexcept {
+  const double dt_c = TemperatureC(t_s);
+  const double band_pm = twin_.spec().fibre.band_half_width_nm * 1e3;
+  const auto& ref = twin_.reference_wavelength_nm();
+  const auto& tc = twin_.temperature_pm_per_c();
+  for (std::size_t i = 0; i < patch::kGratings; ++i) {
+    // Draw every random number every frame, whatever the effects, so streams stay aligned across scenes.
+    const double n = normal_(rng_);
+    const double u = uniform_(rng_);
+    double shift = strain[i] + tc[i] * dt_c;
+    if (shift > band_pm || shift < -band_pm) {
+      shift = std::clamp(shift, -band_pm, band_pm);
+      flags |= kSaturated;
+    }
+    if (dead_[i] || u < dropout_[i]) {
+      wl[i] = std::numeric_limits<double>::quiet_NaN();
+      flags |= kPeakMissing;
+      continue;
+    }
+    wl[i] = ref[i] + (shift + noise_pm_[i] * n) * 1e-3;
+  }
+}
+
+std::string TwinEffects::Summary() const {
+  std::string s;
+  auto add = [&](const std::string& x) { s += (s.empty() ? "" : ",") + x; };
+  if (noise) add("noise");
+  if (gain_spread) add("gain_spread");
+  if (irregular) add("irregular_gratings");
+  if (stiffening) add("stiffening");
+  if (temperature) add("temperature");
+  if (!faults.empty()) add("faults");
+  if (skin_sample) add("skin_sample=" + std::to_string(skin_sample->seed));
+  return s.empty() ? "none" : s;
+}
+
+}  // namespace ruffini::twin

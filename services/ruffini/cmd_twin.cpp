@@ -1,0 +1,212 @@
+// Twin subcommands: simulate, import-csv, twin-report, twin-calibrate.
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <optional>
+
+#include "commands.h"
+#include "figures.h"
+#include "progress.h"
+#include "ruffini/dataset/csv_import.h"
+#include "ruffini/dataset/dataset.h"
+#include "ruffini/error.h"
+#include "ruffini/patch/spec_loader.h"
+#include "ruffini/twin/protocols.h"
+#include "ruffini/twin/report.h"
+#include "ruffini/twin/scene.h"
+
+namespace ruffini::cli {
+namespace {
+
+const char* kDefaultScene = RUFFINI_DEFAULT_SCENE;
+
+struct SceneArgs {
+  std::string scene = kDefaultScene;
+  std::string patch;
+  std::optional<std::uint64_t> skin_sample;
+};
+
+void AddSceneOptions(CLI::App* cmd, SceneArgs& a) {
+  cmd->add_option("--scene", a.scene, "Scene file (YAML)")->capture_default_str();
+  cmd->add_option("--patch", a.patch, "Patch of the scene to use (default: the only one)");
+  cmd->add_option("--skin-sample", a.skin_sample, "Skin sample (cast) seed; overrides the scene's");
+}
+
+twin::Scene LoadSceneArgs(const SceneArgs& a) {
+  twin::Scene s = twin::LoadScene(a.scene);
+  if (a.skin_sample) twin::OverrideSkinSample(s, *a.skin_sample);
+  return s;
+}
+
+std::unique_ptr<twin::SkinTwin> BuildTwin(const twin::Scene& s, const std::string& patch) {
+  return std::make_unique<twin::SkinTwin>(s.Patch(patch).spec, s.effects, std::vector<double>{s.probe.radius_mm});
+}
+
+twin::ProgressFn Bar(std::unique_ptr<ProgressBar>& bar, const std::string& label) {
+  return [&bar, label](std::uint64_t done, std::uint64_t total) {
+    if (!bar) bar = std::make_unique<ProgressBar>(label, total);
+    bar->Update(done);
+  };
+}
+
+void RegisterSimulate(CLI::App& app) {
+  struct Args {
+    SceneArgs scene;
+    std::string protocol = "paper";
+    std::uint64_t seed = 1;
+    std::optional<int> indentations;
+    std::string out;
+    int compression = 0;
+    double step_mm = 2.0;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("simulate", "Run a protocol on the skin twin and write an HDF5 dataset");
+  AddSceneOptions(cmd, args->scene);
+  cmd->add_option("--protocol", args->protocol, "paper | vonfrey | receptive-field")
+      ->check(CLI::IsMember({"paper", "vonfrey", "receptive-field"}))
+      ->capture_default_str();
+  cmd->add_option("--seed", args->seed, "Seed: the same seed gives a bit-identical file")->capture_default_str();
+  cmd->add_option("--indentations", args->indentations, "paper: number of indentations (default 2700)")
+      ->check(CLI::Range(1, 1000000));
+  cmd->add_option("--step-mm", args->step_mm, "receptive-field: grid step")->check(CLI::Range(0.2, 50.0))->capture_default_str();
+  cmd->add_option("--compression", args->compression, "0 none, 1..9 shuffle+deflate")->check(CLI::Range(0, 9))->capture_default_str();
+  cmd->add_option("--out", args->out, "Output dataset (.h5)")->required();
+  cmd->callback([args]() {
+    const twin::Scene scene = LoadSceneArgs(args->scene);
+    const auto twin = BuildTwin(scene, args->scene.patch);
+    const auto t0 = std::chrono::steady_clock::now();
+    double rate = 100.0;
+    std::unique_ptr<ProgressBar> bar;
+    std::unique_ptr<dataset::DatasetWriter> writer;
+    auto open = [&](double r) {
+      writer = std::make_unique<dataset::DatasetWriter>(
+          args->out, twin::TwinDatasetInfo(*twin, scene, args->protocol, args->seed, r), args->compression);
+    };
+    auto sink = [&](std::span<const dataset::Frame> f) { writer->Append(f); };
+    twin::ProtocolRun run;
+    if (args->protocol == "paper") {
+      twin::PaperProtocol p;
+      if (args->indentations) p.indentations = *args->indentations;
+      rate = p.rate_hz;
+      open(rate);
+      run = twin::RunPaper(*twin, scene, p, args->seed, sink, Bar(bar, "indentations"));
+    } else if (args->protocol == "vonfrey") {
+      twin::VonFreyProtocol p;
+      rate = p.rate_hz;
+      open(rate);
+      run = twin::RunVonFrey(*twin, p, args->seed, sink, Bar(bar, "stimulations"));
+    } else {
+      twin::ReceptiveFieldProtocol p;
+      p.step_mm = args->step_mm;
+      rate = p.rate_hz;
+      open(rate);
+      run = twin::RunReceptiveField(*twin, scene, p, args->seed, sink, Bar(bar, "grid rows"));
+    }
+    writer->Close();
+    if (bar) bar->Finish();
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const auto bytes = std::filesystem::file_size(args->out);
+    std::printf("wrote %s: %llu frames, %d indentations, %.2f s, %.1f bytes/frame\n", args->out.c_str(),
+                static_cast<unsigned long long>(run.frames), run.indentations, s,
+                static_cast<double>(bytes) / static_cast<double>(std::max<std::uint64_t>(1, run.frames)));
+  });
+}
+
+void RegisterImportCsv(CLI::App& app) {
+  struct Args {
+    std::string in, out, patch_spec = RUFFINI_DEFAULT_PATCH;
+    int compression = 0;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("import-csv", "Turn a CSV recording (time, 16 wavelengths[, force[, Y, R]]) into a dataset");
+  cmd->add_option("--in", args->in, "CSV recording")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--out", args->out, "Output dataset (.h5)")->required();
+  cmd->add_option("--patch-spec", args->patch_spec, "Patch spec giving the patch name and reference wavelengths")
+      ->capture_default_str();
+  cmd->add_option("--compression", args->compression, "0 none, 1..9 shuffle+deflate")->check(CLI::Range(0, 9));
+  cmd->callback([args]() {
+    const patch::PatchSpec spec = patch::LoadPatchSpec(args->patch_spec);
+    dataset::CsvImportOptions o;
+    o.patch_name = spec.name;
+    o.surface_radius_mm = spec.surface_radius_mm;
+    for (std::size_t i = 0; i < patch::kGratings; ++i) o.reference_wavelength_nm[i] = spec.gratings[i].wavelength_nm;
+    const dataset::Dataset d = dataset::ImportCsv(args->in, o);
+    dataset::WriteDataset(args->out, d, args->compression);
+    std::printf("wrote %s: %zu frames at %.1f Hz\n", args->out.c_str(), d.size(), d.info.sample_rate_hz);
+  });
+}
+
+void RegisterTwinReport(CLI::App& app) {
+  struct Args {
+    SceneArgs scene;
+    std::uint64_t seed = 1;
+    int indentations = 2700;
+    std::string json, out_dir = "twin-report";
+    bool no_figures = false;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("twin-report", "Measure the twin against the paper's statistics (T1-T3, protocol)");
+  AddSceneOptions(cmd, args->scene);
+  cmd->add_option("--seed", args->seed, "Seed of the simulated protocols")->capture_default_str();
+  cmd->add_option("--indentations", args->indentations, "Indentations of the paper protocol to simulate")
+      ->check(CLI::Range(10, 1000000))->capture_default_str();
+  cmd->add_option("--json", args->json, "Also write the measurements as JSON to this file");
+  cmd->add_option("--out-dir", args->out_dir, "Folder for the pictures (hot-spot maps, detection curve)")->capture_default_str();
+  cmd->add_flag("--no-figures", args->no_figures, "Skip the pictures");
+  cmd->callback([args]() {
+    const twin::Scene scene = LoadSceneArgs(args->scene);
+    const auto twin = BuildTwin(scene, args->scene.patch);
+    twin::ReportOptions opt;
+    opt.seed = args->seed;
+    opt.paper_indentations = args->indentations;
+    std::unique_ptr<ProgressBar> bar;
+    spdlog::info("measuring hot spots, cross-talk, detection and the paper protocol ({} indentations)", args->indentations);
+    const twin::TwinReport r = twin::MeasureTwin(*twin, scene, opt, Bar(bar, "paper protocol"));
+    if (bar) bar->Finish();
+    std::fputs(twin::FormatReport(r).c_str(), stdout);
+    if (!args->json.empty()) {
+      std::ofstream(args->json) << twin::ReportJson(r);
+      std::printf("\nwrote %s\n", args->json.c_str());
+    }
+    if (!args->no_figures) {
+      std::filesystem::create_directories(args->out_dir);
+      const auto maps = twin::MeasureHotSpotMaps(*twin, scene.probe, 2.5, opt.hot_spot_shift_pm, 0.5);
+      const auto paths = WriteHotSpotFigures(*twin, maps, r, opt.hot_spot_force_n, args->out_dir);
+      const std::string det = WriteDetectionFigure(r, args->out_dir);
+      std::printf("wrote %zu hot-spot maps and %s\n", paths.size(), det.c_str());
+    }
+  });
+}
+
+void RegisterCalibrate(CLI::App& app) {
+  struct Args {
+    SceneArgs scene;
+    double target_mm2 = twin::Targets::kHotSpotMedianMm2;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("twin-calibrate",
+                                     "Fit the patch's strain_transfer so the median hot-spot area meets the paper's");
+  AddSceneOptions(cmd, args->scene);
+  cmd->add_option("--target-mm2", args->target_mm2, "Median hot-spot area to reach")->capture_default_str();
+  cmd->callback([args]() {
+    const twin::Scene scene = LoadSceneArgs(args->scene);
+    const auto& sp = scene.Patch(args->scene.patch);
+    const double t = twin::CalibrateStrainTransfer(sp.spec, scene.effects, scene.probe, args->target_mm2);
+    std::printf("strain_transfer: %.4g   # put this into %s (fibre.strain_transfer)\n", t, sp.spec_path.c_str());
+  });
+}
+
+}  // namespace
+
+void RegisterTwinCommands(CLI::App& app) {
+  RegisterSimulate(app);
+  RegisterImportCsv(app);
+  RegisterTwinReport(app);
+  RegisterCalibrate(app);
+}
+
+}  // namespace ruffini::cli

@@ -1,0 +1,9 @@
+#pragma once
+// Subcommands of the `ruffini` tool. Each Register* adds its subcommand to the app; the callback runs it.
+#include <CLI/CLI.hpp>
+
+namespace ruffini::cli {
+
+void RegisterTwinCommands(CLI::App& app);
+
+}  // namespace ruffini::cli
