@@ -1,5 +1,6 @@
 // ruffini: the command-line tool. Subcommands live in cmd_*.cpp; this file only wires them and maps
 // errors to exit codes: 0 ok, 1 bad input (the message says what), 2 usage.
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -10,6 +11,7 @@
 #include "ruffini/error.h"
 
 int main(int argc, char** argv) {
+  spdlog::set_default_logger(spdlog::stderr_color_mt("ruffini"));  // stdout carries results only
   CLI::App app{"ruffini: optical robot skin tools (twin, datasets, reports)"};
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "Show help for every subcommand");

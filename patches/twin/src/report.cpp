@@ -326,6 +326,14 @@ TwinReport MeasureTwin(const SkinTwin& twin, const Scene& scene, const ReportOpt
     }
     r.gratings_over_2pm[static_cast<std::size_t>(k)] = static_cast<int>(std::lround(stats::Median(counts)));
   }
+  const double hs_forces[3] = {0.05, 2.5 / 6.0, 2.5};
+  for (int k = 0; k < 3; ++k) {
+    std::vector<double> shifts;
+    for (std::size_t i = 0; i < patch::kGratings; ++i) {
+      shifts.push_back(twin.StrainShiftsPm(Contact{r.hot_spots[i].peak_at, hs_forces[k], scene.probe})[i]);
+    }
+    r.hot_spot_shift_pm[static_cast<std::size_t>(k)] = stats::Median(shifts);
+  }
   return r;
 }
 
@@ -350,7 +358,10 @@ std::string FormatReport(const TwinReport& r) {
     min25 = std::min(min25, r.crosstalk_2n5[i]);
   }
   line("T3 neighbours > 2 pm at 1 N (min over FBGs)", std::to_string(min1), ">= 1", min1 >= 1 ? "ok" : "OUT");
-  line("T3 neighbours > 2 pm at 2.5 N (min over FBGs)", std::to_string(min25), ">= 3 (several)", min25 >= 3 ? "ok" : "OUT");
+  std::vector<double> c25(r.crosstalk_2n5.begin(), r.crosstalk_2n5.end());
+  const double med25 = stats::Median(c25);
+  line("T3 neighbours > 2 pm at 2.5 N (min / median)", std::to_string(min25) + " / " + Fmt("%.1f", med25),
+       ">= 3 (several)", min25 >= 3 ? "ok" : "OUT (see note)");
   line("T1 75 % detection, uniform random sites", Fmt("%.0f mN", r.detection_uniform.threshold75_n * 1e3), "50.6 mN",
        "measured (see note)");
   line("T1 75 % detection, sites <= 3 mm from a FBG", Fmt("%.0f mN", r.detection_near_grating.threshold75_n * 1e3),
@@ -371,7 +382,9 @@ std::string FormatReport(const TwinReport& r) {
        within(p.rg_location_error_iqr_mm, Targets::kRgLocationIqrMm, 0.10) ? "ok" : "OUT");
   line("paper: frames before contact", Fmt("%.0f %%", p.fraction_before_contact * 100), "about 37 %", "info");
   line("paper: median force above 50 mN", Fmt("%.2f N", p.median_force_above_50mn_n), "about 0.87 N", "info");
-  line("paper: largest shift at 2.5 N, median", Fmt("%.0f pm", p.peak_shift_at_max_force_pm), "about 124 pm", "info");
+  line("shift at a hot spot, 0.05 / 0.42 / 2.5 N", Fmt("%.1f", r.hot_spot_shift_pm[0]) + " / " + Fmt("%.0f", r.hot_spot_shift_pm[1]) +
+       " / " + Fmt("%.0f pm", r.hot_spot_shift_pm[2]), "3 / 22 / 124 pm (feasibility)", "info");
+  line("paper: largest shift at 2.5 N, random sites", Fmt("%.0f pm", p.peak_shift_at_max_force_pm), "(median)", "info");
   line("gratings > 2 pm at 0.05/0.5/1/2.5 N",
        std::to_string(r.gratings_over_2pm[0]) + "/" + std::to_string(r.gratings_over_2pm[1]) + "/" +
            std::to_string(r.gratings_over_2pm[2]) + "/" + std::to_string(r.gratings_over_2pm[3]),
@@ -394,7 +407,13 @@ std::string FormatReport(const TwinReport& r) {
   o << "\nNote on T1: a linear elastic twin that meets the hot-spot statistic (T2) cannot also detect 75 % of\n"
        "random-site touches at 50.6 mN: with peak sensitivity near 50-60 pm/N, 2 pm needs ~40 mN right over a\n"
        "grating and several times more between gratings. The paper's von Frey sites were probably near\n"
-       "receptive-field centres; the near-grating line shows that case. See docs/twin.md.\n";
+       "receptive-field centres; the near-grating line shows that case. See docs/twin.md.\n"
+       "Note on T3 at 2.5 N: the bonded 8 mm layer confines the strain field: at the fibre depth the grating\n"
+       "response is ~2 pm/N at 14 mm across the fibre and ~20 mm along it, and changes sign on the diagonals.\n"
+       "Row-end gratings have one neighbour that close, so they see one neighbour, not several. More\n"
+       "sensitivity does not help (measured: 1.5x and 2.3x, hot spots 48 and 80 mm2, still min 1 / median 2);\n"
+       "only rows closer than the paper's spacing would. We keep the paper's geometry and T2 and report T3 at\n"
+       "2.5 N as measured. See docs/twin.md.\n";
   return o.str();
 }
 
@@ -437,6 +456,8 @@ std::string ReportJson(const TwinReport& r) {
     << ", \"fraction_before_contact\": " << p.fraction_before_contact
     << ", \"median_force_above_50mn_n\": " << p.median_force_above_50mn_n
     << ", \"peak_shift_at_max_force_pm\": " << p.peak_shift_at_max_force_pm << "},\n";
+  o << "  \"hot_spot_shift_pm_at_0.05_0.42_2.5_n\": [" << r.hot_spot_shift_pm[0] << ", " << r.hot_spot_shift_pm[1] << ", "
+    << r.hot_spot_shift_pm[2] << "],\n";
   o << "  \"gratings_over_2pm_at_0.05_0.5_1_2.5_n\": [" << r.gratings_over_2pm[0] << ", " << r.gratings_over_2pm[1] << ", "
     << r.gratings_over_2pm[2] << ", " << r.gratings_over_2pm[3] << "]\n}\n";
   return o.str();

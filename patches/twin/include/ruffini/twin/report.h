@@ -55,7 +55,7 @@ struct ProtocolStats {
   double rg_location_error_median_mm = 0.0, rg_location_error_iqr_mm = 0.0;
   double fraction_before_contact = 0.0;
   double median_force_above_50mn_n = 0.0;
-  double peak_shift_at_max_force_pm = 0.0;  // median over indentations of the largest shift at 2.5 N
+  double peak_shift_at_max_force_pm = 0.0;  // median over indentations (random sites) of the largest shift at 2.5 N
 };
 
 struct TwinReport {
@@ -70,6 +70,7 @@ struct TwinReport {
   DetectionFit detection_near_grating;  // sites within 3 mm of a grating (the paper's likely sites)
   ProtocolStats paper;
   std::array<int, 4> gratings_over_2pm{};  // median count of gratings > 2 pm at 0.05, 0.5, 1, 2.5 N
+  std::array<double, 3> hot_spot_shift_pm{};  // median over gratings of the shift at their hot spot, 0.05/0.42/2.5 N
 };
 
 struct ReportOptions {

@@ -1,0 +1,358 @@
+// The indentation protocols (reproducibility, structure of the paper, von Frey and receptive-field runs)
+// and scene loading.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <regex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "ruffini/dataset/dataset.h"
+#include "ruffini/error.h"
+#include "ruffini/twin/protocols.h"
+#include "ruffini/twin/scene.h"
+#include "ruffini/twin/twin.h"
+
+namespace ruffini::twin {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr std::size_t kN = patch::kGratings;
+
+const Scene& DefaultScene() {
+  static const Scene scene = LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
+  return scene;
+}
+
+const SkinTwin& DefaultTwin() {
+  static const SkinTwin twin(DefaultScene().Patch().spec, DefaultScene().effects, {DefaultScene().probe.radius_mm});
+  return twin;
+}
+
+std::vector<dataset::Frame> Collect(const std::function<ProtocolRun(const FrameSink&)>& run, ProtocolRun* out) {
+  std::vector<dataset::Frame> frames;
+  const ProtocolRun r = run([&](std::span<const dataset::Frame> block) { frames.insert(frames.end(), block.begin(), block.end()); });
+  if (out) *out = r;
+  return frames;
+}
+
+// A fresh folder per test, removed afterwards.
+class TempDirTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::path(::testing::TempDir()) / (std::to_string(::getpid()) + "_ruffini_twin_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  [[nodiscard]] std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+  std::string Write(const std::string& name, const std::string& text) const {
+    const std::string p = Path(name);
+    std::ofstream(p) << text;
+    return p;
+  }
+  fs::path dir_;
+};
+
+std::string ReadBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 11. Reproducible files.
+
+class ProtocolFiles : public TempDirTest {
+ protected:
+  std::string RunToFile(const std::string& name, std::uint64_t seed) {
+    const SkinTwin& twin = DefaultTwin();
+    PaperProtocol p;
+    p.indentations = 20;
+    const std::string path = Path(name);
+    dataset::DatasetWriter w(path, TwinDatasetInfo(twin, DefaultScene(), "paper", seed, p.rate_hz));
+    const ProtocolRun run = RunPaper(twin, DefaultScene(), p, seed, [&](std::span<const dataset::Frame> f) { w.Append(f); });
+    w.Close();
+    EXPECT_EQ(w.frames_written(), run.frames);
+    EXPECT_GT(run.frames, 20u * 500u);
+    return path;
+  }
+};
+
+TEST_F(ProtocolFiles, SameSeedGivesBitIdenticalFiles) {
+  const std::string a = ReadBytes(RunToFile("a.h5", 7));
+  const std::string b = ReadBytes(RunToFile("b.h5", 7));
+  const std::string c = ReadBytes(RunToFile("c.h5", 8));
+  ASSERT_GT(a.size(), 100000u);
+  EXPECT_TRUE(a == b) << "same seed, different bytes";
+  EXPECT_FALSE(a == c) << "different seed, same bytes";
+  const dataset::Dataset d = dataset::ReadDataset(Path("a.h5"));
+  EXPECT_NE(d.info.source.find("seed=7"), std::string::npos);
+  EXPECT_EQ(d.info.reference_wavelength_nm, DefaultTwin().reference_wavelength_nm());
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 12. Paper protocol structure.
+
+TEST(Protocols, PaperProtocolStructure) {
+  const SkinTwin& twin = DefaultTwin();
+  PaperProtocol p;
+  p.indentations = 40;
+  ProtocolRun run;
+  const auto frames = Collect([&](const FrameSink& s) { return RunPaper(twin, DefaultScene(), p, 3, s); }, &run);
+  ASSERT_EQ(run.frames, frames.size());
+  EXPECT_EQ(run.indentations, p.indentations);
+  ASSERT_GT(frames.size(), static_cast<std::size_t>(p.rest_frames));
+  const patch::Region area = twin.spec().indented_area;
+
+  for (int k = 0; k < p.rest_frames; ++k) {
+    const auto& f = frames[static_cast<std::size_t>(k)];
+    EXPECT_EQ(f.indentation, -1);
+    EXPECT_TRUE(std::isnan(f.y_mm));
+    EXPECT_TRUE(std::isnan(f.r_deg));
+    EXPECT_EQ(f.true_force_n, 0.0f);
+  }
+  int current = -1;
+  std::size_t in_indent = 0, zero_force = 0;
+  float last_force = 0.0f, y = 0.0f, r = 0.0f;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const auto& f = frames[k];
+    ASSERT_EQ(f.serial, k);
+    ASSERT_NEAR(f.t_s, static_cast<double>(k) / 100.0, 1e-9);
+    if (k < static_cast<std::size_t>(p.rest_frames)) continue;
+    ASSERT_GE(f.indentation, 0) << "frame " << k;
+    ++in_indent;
+    zero_force += f.true_force_n == 0.0f ? 1 : 0;
+    if (f.indentation != current) {
+      ASSERT_EQ(f.indentation, current + 1) << "indentations contiguous, frame " << k;
+      current = f.indentation;
+      EXPECT_EQ(f.true_force_n, 0.0f) << "indentation " << current << " starts at rest";
+      y = f.y_mm;
+      r = f.r_deg;
+      EXPECT_TRUE(area.Contains({y, r}, 1e-4)) << y << ", " << r;
+    } else {
+      ASSERT_GE(f.true_force_n, last_force) << "indentation " << current;
+      ASSERT_EQ(f.y_mm, y);
+      ASSERT_EQ(f.r_deg, r);
+    }
+    ASSERT_LE(f.true_force_n, 2.5f);
+    ASSERT_TRUE(std::isfinite(f.force_n));
+    last_force = f.true_force_n;
+  }
+  EXPECT_EQ(current, p.indentations - 1);
+  const double frac0 = static_cast<double>(zero_force) / static_cast<double>(in_indent);
+  EXPECT_GE(frac0, 0.25);
+  EXPECT_LE(frac0, 0.50);
+  // The probe positions spread over the area (not all in one spot).
+  std::set<float> ys;
+  for (const auto& f : frames) if (f.indentation >= 0) ys.insert(f.y_mm);
+  EXPECT_EQ(ys.size(), static_cast<std::size_t>(p.indentations));
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 13. Von Frey.
+
+TEST(Protocols, VonFreyHoldsAtEachFilamentsForce) {
+  const SkinTwin& twin = DefaultTwin();
+  VonFreyProtocol p;
+  p.subjects = 1;
+  p.sites = 3;
+  ProtocolRun run;
+  const auto frames = Collect([&](const FrameSink& s) { return RunVonFrey(twin, p, 5, s); }, &run);
+  const int stim = static_cast<int>(p.filaments_g.size()) * p.subjects * p.sites;
+  ASSERT_EQ(p.filaments_g.size(), 8u);
+  EXPECT_EQ(run.indentations, stim);
+  EXPECT_EQ(frames.size(), static_cast<std::size_t>(stim * (p.rest_frames + p.ramp_frames + p.hold_frames + p.release_frames)));
+  std::map<int, std::vector<const dataset::Frame*>> by;
+  for (const auto& f : frames) {
+    if (f.indentation >= 0) by[f.indentation].push_back(&f);
+  }
+  ASSERT_EQ(static_cast<int>(by.size()), stim);
+  for (const auto& [index, fs] : by) {
+    ASSERT_GE(index, 0);
+    ASSERT_LT(index, stim);
+    const double grams = p.filaments_g[static_cast<std::size_t>(index / p.sites)];  // subject 0: filament-major
+    const auto nominal = static_cast<float>(GramsToNewtons(grams));
+    int at_nominal = 0;
+    float max_f = 0.0f;
+    for (const auto* f : fs) {
+      max_f = std::max(max_f, f->true_force_n);
+      at_nominal += f->true_force_n == nominal ? 1 : 0;
+      EXPECT_TRUE(twin.spec().indented_area.Contains({f->y_mm, f->r_deg}, 1e-4));
+    }
+    EXPECT_EQ(max_f, nominal) << "stimulation " << index;
+    EXPECT_GE(at_nominal, p.hold_frames) << "stimulation " << index;
+    EXPECT_EQ(fs.size(), static_cast<std::size_t>(p.ramp_frames + p.hold_frames + p.release_frames));
+    EXPECT_EQ(fs.back()->true_force_n, 0.0f) << "released";
+  }
+  EXPECT_NEAR(GramsToNewtons(60.0), 0.588399, 1e-6);
+  // The heaviest filament is felt; the response is on the wavelength channels.
+  bool moved = false;
+  for (const auto& f : frames) {
+    if (f.true_force_n > 0.5f) {
+      for (std::size_t i = 0; i < kN; ++i) {
+        moved |= std::abs(f.wavelength_nm[i] - twin.reference_wavelength_nm()[i]) > 2e-3;
+      }
+    }
+  }
+  EXPECT_TRUE(moved);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 14. Receptive field.
+
+TEST(Protocols, ReceptiveFieldCoversTheGridAndRamps) {
+  const SkinTwin& twin = DefaultTwin();
+  ReceptiveFieldProtocol p;
+  p.step_mm = 10.0;
+  ProtocolRun run;
+  const auto frames = Collect([&](const FrameSink& s) { return RunReceptiveField(twin, DefaultScene(), p, 9, s); }, &run);
+  const patch::Region area = twin.spec().indented_area;
+  const auto& geo = twin.geometry();
+  const double arc0 = geo.ArcMm(area.r_min_deg), arc1 = geo.ArcMm(area.r_max_deg);
+  const int ny = static_cast<int>(std::floor((area.y_max_mm - area.y_min_mm) / p.step_mm)) + 1;  // 13
+  const int na = static_cast<int>(std::floor((arc1 - arc0) / p.step_mm)) + 1;                     // 6
+  ASSERT_EQ(ny, 13);
+  ASSERT_EQ(na, 6);
+  EXPECT_EQ(run.indentations, ny * na);
+  EXPECT_EQ(frames.size(), static_cast<std::size_t>(ny * na * (p.ramp_frames + 1)));
+
+  std::map<int, std::vector<const dataset::Frame*>> by;
+  for (const auto& f : frames) by[f.indentation].push_back(&f);
+  ASSERT_EQ(static_cast<int>(by.size()), ny * na);
+  std::set<std::pair<int, int>> cells;
+  for (const auto& [index, fs] : by) {
+    const float y = fs.front()->y_mm, r = fs.front()->r_deg;
+    EXPECT_TRUE(area.Contains({y, r}, 1e-4)) << y << ", " << r;
+    const double iy = (y - area.y_min_mm) / p.step_mm, ia = (geo.ArcMm(r) - arc0) / p.step_mm;
+    EXPECT_NEAR(iy, std::round(iy), 1e-4);
+    EXPECT_NEAR(ia, std::round(ia), 1e-4);
+    cells.insert({static_cast<int>(std::lround(iy)), static_cast<int>(std::lround(ia))});
+    EXPECT_EQ(fs.front()->true_force_n, 0.0f);
+    EXPECT_FLOAT_EQ(fs.back()->true_force_n, 2.5f);
+    for (std::size_t k = 1; k < fs.size(); ++k) {
+      EXPECT_GT(fs[k]->true_force_n, fs[k - 1]->true_force_n);
+      EXPECT_EQ(fs[k]->y_mm, y);
+      EXPECT_EQ(fs[k]->r_deg, r);
+    }
+  }
+  EXPECT_EQ(static_cast<int>(cells.size()), ny * na);
+  for (const auto& [iy, ia] : cells) {
+    EXPECT_GE(iy, 0);
+    EXPECT_LT(iy, ny);
+    EXPECT_GE(ia, 0);
+    EXPECT_LT(ia, na);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 15. Scenes.
+
+TEST(Scenes, DefaultSceneLoads) {
+  const Scene& s = DefaultScene();
+  EXPECT_EQ(s.name, "forearm-bench");
+  ASSERT_EQ(s.patches.size(), 1u);
+  EXPECT_EQ(s.Patch().name, "forearm");
+  EXPECT_EQ(s.Patch().spec.name, "forearm");
+  EXPECT_EQ(s.probe.shape, Probe::Shape::kSphere);
+  EXPECT_EQ(s.probe.radius_mm, 5.5);
+  const TwinEffects& e = s.effects;
+  ASSERT_TRUE(e.noise.has_value());
+  EXPECT_EQ(e.noise->sigma_pm, 0.3);
+  ASSERT_TRUE(e.gain_spread.has_value());
+  EXPECT_EQ(e.gain_spread->sigma, 0.07);
+  ASSERT_TRUE(e.irregular.has_value());
+  std::set<int> irregular;
+  for (const auto& g : e.irregular->gratings) irregular.insert(g.grating);
+  EXPECT_EQ(irregular, (std::set<int>{2, 6, 12, 13}));
+  EXPECT_TRUE(e.stiffening.has_value());
+  ASSERT_TRUE(e.skin_sample.has_value());
+  EXPECT_EQ(e.skin_sample->seed, 0u);
+  EXPECT_FALSE(e.temperature.has_value());
+  EXPECT_TRUE(e.faults.empty());
+  EXPECT_EQ(s.load_cell.resolution_n, 1.0 / 256.0);
+}
+
+class SceneFiles : public TempDirTest {
+ protected:
+  static std::string SpecPath() { return std::string(RUFFINI_SOURCE_DIR) + "/config/patches/forearm.yaml"; }
+  std::string SceneText(const std::string& spec, const std::string& effects) const {
+    return "name: test\n"
+           "patches:\n"
+           "  - name: forearm\n"
+           "    spec: " + spec + "\n"
+           "twin:\n"
+           "  probe: {shape: sphere, radius_mm: 5.5}\n"
+           "  effects:\n" + effects;
+  }
+};
+
+TEST_F(SceneFiles, MinimalSceneLoadsOnlyWhatItNames) {
+  const auto path = Write("min.yaml", SceneText(SpecPath(), "    noise: {sigma_pm: 0.5}\n"));
+  const auto s = LoadScene(path);
+  ASSERT_TRUE(s.effects.noise.has_value());
+  EXPECT_EQ(s.effects.noise->sigma_pm, 0.5);
+  EXPECT_FALSE(s.effects.gain_spread || s.effects.irregular || s.effects.stiffening || s.effects.temperature ||
+               s.effects.skin_sample);
+  EXPECT_EQ(s.effects.Summary(), "noise");
+}
+
+TEST_F(SceneFiles, UnknownEffectKeyIsNamedWithItsPlace) {
+  const auto path = Write("colour.yaml", SceneText(SpecPath(), "    noise: {sigma_pm: 0.3}\n    colour: red\n"));
+  try {
+    (void)LoadScene(path);
+    FAIL() << "an unknown key must be rejected";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("colour.yaml"), std::string::npos) << m;
+    EXPECT_TRUE(std::regex_search(m, std::regex(R"(colour\.yaml:\d+:\d+)"))) << m;
+    EXPECT_NE(m.find("'twin.effects.colour' is not a known key here"), std::string::npos) << m;
+  }
+}
+
+TEST_F(SceneFiles, MissingPatchSpecIsNamed) {
+  const auto abs_path = Write("abs.yaml", SceneText("/no/such/dir/arm.yaml", ""));
+  try {
+    (void)LoadScene(abs_path);
+    FAIL() << "a missing spec must be rejected";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("/no/such/dir/arm.yaml"), std::string::npos) << m;
+    EXPECT_NE(m.find("abs.yaml"), std::string::npos) << m;
+  }
+  const auto rel_path = Write("rel.yaml", SceneText("missing-patch.yaml", ""));
+  try {
+    (void)LoadScene(rel_path);
+    FAIL() << "a missing spec must be rejected";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("missing-patch.yaml"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Scenes, OverrideSkinSampleSetsTheSeed) {
+  Scene s = DefaultScene();
+  OverrideSkinSample(s, 42);
+  ASSERT_TRUE(s.effects.skin_sample.has_value());
+  EXPECT_EQ(s.effects.skin_sample->seed, 42u);
+  EXPECT_EQ(s.effects.skin_sample->position_mm, DefaultScene().effects.skin_sample->position_mm);
+  EXPECT_EQ(s.effects.fabrication_seed(), 42u);
+  Scene off = DefaultScene();
+  off.effects.skin_sample.reset();
+  OverrideSkinSample(off, 9);
+  ASSERT_TRUE(off.effects.skin_sample.has_value());
+  EXPECT_EQ(off.effects.skin_sample->seed, 9u);
+  EXPECT_NE(off.effects.Summary().find("skin_sample=9"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace ruffini::twin

@@ -1,0 +1,511 @@
+// Behaviour of the skin twin at the extremes: zero and overload forces, the patch edge, superposition,
+// temperature, faults, skin samples, where the response peaks, and that effects are built only when named.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "ruffini/error.h"
+#include "ruffini/patch/spec_loader.h"
+#include "ruffini/twin/scene.h"
+#include "ruffini/twin/twin.h"
+
+namespace ruffini::twin {
+namespace {
+
+constexpr std::size_t kN = patch::kGratings;
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+const patch::PatchSpec& Spec() {
+  static const patch::PatchSpec spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
+  return spec;
+}
+
+// No effects at all: nominal layer, unit gains, one lobe per grating, no noise.
+const SkinTwin& PlainTwin() {
+  static const SkinTwin twin(Spec(), TwinEffects{}, {5.5});
+  return twin;
+}
+
+const Scene& DefaultScene() {
+  static const Scene scene = LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
+  return scene;
+}
+
+// The default scene's twin (every effect the scene names).
+const SkinTwin& DefaultTwin() {
+  static const SkinTwin twin(DefaultScene().Patch().spec, DefaultScene().effects, {DefaultScene().probe.radius_mm});
+  return twin;
+}
+
+// Twins built with only a skin sample of the given seed (each seed changes the layer: new tables, built once).
+const SkinTwin& SampleTwin(std::uint64_t seed) {
+  static std::map<std::uint64_t, std::unique_ptr<SkinTwin>> twins;
+  auto& t = twins[seed];
+  if (!t) {
+    TwinEffects e;
+    e.skin_sample = SkinSampleEffect{};
+    e.skin_sample->seed = seed;
+    t = std::make_unique<SkinTwin>(Spec(), e, std::vector<double>{5.5});
+  }
+  return *t;
+}
+
+// A twin with the given effects on the nominal layer (cached tables: cheap).
+SkinTwin TwinWith(const TwinEffects& e) { return SkinTwin(Spec(), e, {5.5}); }
+
+Contact Sphere(double y, double r, double f) { return Contact{{y, r}, f, Probe{Probe::Shape::kSphere, 5.5}}; }
+
+Shifts Shift(const SkinTwin& twin, std::vector<Contact> contacts, std::uint32_t& flags) {
+  Shifts s;
+  s.fill(kNaN);
+  flags = 0;
+  twin.StrainShiftsPm(contacts, s, flags);
+  return s;
+}
+
+bool AllFinite(const Shifts& s) {
+  return std::all_of(s.begin(), s.end(), [](double v) { return std::isfinite(v); });
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 1. Zero force.
+
+TEST(TwinExtremes, ZeroForceGivesExactlyZeroShift) {
+  for (const SkinTwin* twin : {&PlainTwin(), &DefaultTwin()}) {
+    std::uint32_t flags = 0;
+    const Shifts none = Shift(*twin, {}, flags);
+    EXPECT_EQ(flags, 0u);
+    for (double v : none) EXPECT_EQ(v, 0.0);
+    const Shifts zero = Shift(*twin, {Sphere(66, 72.5, 0.0), Sphere(24, 42.5, 0.0)}, flags);
+    EXPECT_EQ(flags, 0u);
+    for (double v : zero) EXPECT_EQ(v, 0.0);
+  }
+}
+
+TEST(TwinExtremes, ZeroForceWithoutNoiseReadsTheReferenceExactly) {
+  const SkinTwin& twin = PlainTwin();
+  InterrogatorSim sim(twin, 11);
+  const Shifts zero{};
+  for (int k = 0; k < 200; ++k) {
+    std::array<double, kN> wl{};
+    std::uint32_t flags = 0;
+    sim.Read(k * 0.01, zero, wl, flags);
+    EXPECT_EQ(flags, 0u);
+    for (std::size_t i = 0; i < kN; ++i) ASSERT_EQ(wl[i], twin.reference_wavelength_nm()[i]) << "grating " << i + 1;
+  }
+}
+
+TEST(TwinExtremes, ZeroForceWithNoiseStaysWithinSixSigma) {
+  TwinEffects e;
+  e.noise = NoiseEffect{0.3};
+  const SkinTwin twin = TwinWith(e);
+  InterrogatorSim sim(twin, 12);
+  const Shifts zero{};
+  double max_abs = 0.0, sum2 = 0.0;
+  int n = 0;
+  for (int k = 0; k < 2000; ++k) {
+    std::array<double, kN> wl{};
+    std::uint32_t flags = 0;
+    sim.Read(k * 0.01, zero, wl, flags);
+    EXPECT_EQ(flags, 0u);
+    for (std::size_t i = 0; i < kN; ++i) {
+      const double d = (wl[i] - twin.reference_wavelength_nm()[i]) * 1e3;
+      ASSERT_TRUE(std::isfinite(d));
+      max_abs = std::max(max_abs, std::abs(d));
+      sum2 += d * d;
+      ++n;
+    }
+  }
+  EXPECT_LE(max_abs, 6 * 0.3);
+  // The noise is really there, at about the asked level.
+  const double sd = std::sqrt(sum2 / n);
+  EXPECT_NEAR(sd, 0.3, 0.03);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 2. Overload.
+
+TEST(TwinExtremes, TenNewtonOverloadIsClippedToTheBandAndFlagged) {
+  const SkinTwin& twin = PlainTwin();
+  const double band_nm = twin.spec().fibre.band_half_width_nm;
+  const auto& ref = twin.reference_wavelength_nm();
+  InterrogatorSim sim(twin, 3);
+  for (std::size_t g = 0; g < kN; ++g) {
+    const auto& c = twin.spec().gratings[g].centre;
+    std::uint32_t flags = 0;
+    const Shifts s = Shift(twin, {Sphere(c.y_mm, c.r_deg, 10.0)}, flags);
+    EXPECT_TRUE(AllFinite(s)) << "grating " << g + 1;
+    std::array<double, kN> wl{};
+    sim.Read(0.0, s, wl, flags);
+    EXPECT_TRUE(flags & kSaturated) << "10 N on grating " << g + 1 << ": peak shift " << s[g] << " pm";
+    for (std::size_t i = 0; i < kN; ++i) {
+      ASSERT_TRUE(std::isfinite(wl[i]));
+      EXPECT_GE(wl[i], ref[i] - band_nm - 1e-9) << "grating " << i + 1;
+      EXPECT_LE(wl[i], ref[i] + band_nm + 1e-9) << "grating " << i + 1;
+      // Never wrapped into another grating's band: its own reference is the nearest one.
+      for (std::size_t j = 0; j < kN; ++j) {
+        if (j != i) {
+          EXPECT_GT(std::abs(wl[i] - ref[j]), band_nm) << "grating " << i + 1 << " in band of " << j + 1;
+        }
+      }
+    }
+  }
+  // With every effect on (noise included), still finite and in the band give or take the noise.
+  const SkinTwin& full = DefaultTwin();
+  InterrogatorSim noisy(full, 4);
+  for (std::size_t g = 0; g < kN; ++g) {
+    const auto& c = full.grating_centres()[g];
+    std::uint32_t flags = 0;
+    const Shifts s = Shift(full, {Sphere(c.y_mm, c.r_deg, 10.0)}, flags);
+    EXPECT_TRUE(AllFinite(s));
+    std::array<double, kN> wl{};
+    noisy.Read(0.0, s, wl, flags);
+    for (std::size_t i = 0; i < kN; ++i) {
+      ASSERT_TRUE(std::isfinite(wl[i]));
+      EXPECT_LE(std::abs(wl[i] - full.reference_wavelength_nm()[i]), band_nm + 6 * 0.3e-3);
+    }
+  }
+}
+
+TEST(TwinExtremes, NormalForceIsNotFlagged) {
+  const SkinTwin& twin = PlainTwin();
+  InterrogatorSim sim(twin, 5);
+  for (std::size_t g = 0; g < kN; ++g) {
+    const auto& c = twin.spec().gratings[g].centre;
+    std::uint32_t flags = 0;
+    const Shifts s = Shift(twin, {Sphere(c.y_mm, c.r_deg, 2.5)}, flags);
+    std::array<double, kN> wl{};
+    sim.Read(0.0, s, wl, flags);
+    EXPECT_EQ(flags, 0u) << "2.5 N on grating " << g + 1;
+    EXPECT_NEAR((wl[g] - twin.reference_wavelength_nm()[g]) * 1e3, s[g], 1e-6);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 3. Patch edge and outside; bad contacts.
+
+TEST(TwinExtremes, ContactOnTheExtentBoundaryCounts) {
+  const SkinTwin& twin = PlainTwin();
+  const double ye = twin.spec().extent_y_mm, re = twin.spec().extent_r_deg;
+  for (const Contact& c : {Sphere(0, 72.5, 1.0), Sphere(ye, 72.5, 1.0), Sphere(24, 0, 1.0), Sphere(66, re, 1.0),
+                           Sphere(0, 0, 1.0), Sphere(ye, re, 1.0)}) {
+    std::uint32_t flags = 0;
+    const Shifts s = Shift(twin, {c}, flags);
+    EXPECT_TRUE(AllFinite(s)) << c.at.y_mm << ", " << c.at.r_deg;
+    EXPECT_EQ(flags & kOffPatch, 0u) << c.at.y_mm << ", " << c.at.r_deg;
+    EXPECT_EQ(flags, 0u);
+  }
+  // Near a grating the edge contact really responds (Y = 24 row: R = 0 is 42.5 deg = 28 mm from FBG 1).
+  std::uint32_t flags = 0;
+  const Shifts near = Shift(twin, {Sphere(0, 42.5, 2.5)}, flags);
+  EXPECT_GT(std::abs(near[0]), 0.0);
+}
+
+TEST(TwinExtremes, ContactOutsideThePatchContributesNothing) {
+  const SkinTwin& twin = DefaultTwin();
+  const Contact inside = Sphere(66, 72.5, 1.0);
+  std::uint32_t flags = 0;
+  const Shifts alone = Shift(twin, {inside}, flags);
+  ASSERT_EQ(flags, 0u);
+  for (const Contact& out : {Sphere(-1, 72.5, 1.0), Sphere(151, 72.5, 1.0), Sphere(66, 146, 1.0), Sphere(66, -5, 1.0),
+                             Sphere(-1, 72.5, 10.0)}) {
+    const Shifts s = Shift(twin, {out}, flags);
+    EXPECT_TRUE(flags & kOffPatch) << out.at.y_mm << ", " << out.at.r_deg;
+    EXPECT_EQ(flags & kBadContact, 0u);
+    for (double v : s) EXPECT_EQ(v, 0.0);
+    const Shifts both = Shift(twin, {inside, out}, flags);
+    EXPECT_TRUE(flags & kOffPatch);
+    for (std::size_t i = 0; i < kN; ++i) EXPECT_EQ(both[i], alone[i]);
+  }
+}
+
+TEST(TwinExtremes, BadContactsContributeNothingAndAreFlagged) {
+  const SkinTwin& twin = DefaultTwin();
+  const Contact inside = Sphere(66, 72.5, 1.0);
+  std::uint32_t flags = 0;
+  const Shifts alone = Shift(twin, {inside}, flags);
+  ASSERT_EQ(flags, 0u);
+  std::vector<Contact> bad = {Sphere(66, 72.5, kNaN), Sphere(66, 72.5, -0.5),
+                              Sphere(66, 72.5, std::numeric_limits<double>::infinity()), Sphere(kNaN, 72.5, 1.0),
+                              Contact{{66, 72.5}, 1.0, Probe{Probe::Shape::kSphere, 3.0}}};  // not built for 3 mm
+  for (const Contact& b : bad) {
+    const Shifts s = Shift(twin, {b}, flags);
+    EXPECT_TRUE(flags & kBadContact) << "force " << b.force_n << ", radius " << b.probe.radius_mm;
+    for (double v : s) EXPECT_EQ(v, 0.0);
+    const Shifts both = Shift(twin, {b, inside}, flags);
+    EXPECT_TRUE(flags & kBadContact);
+    for (std::size_t i = 0; i < kN; ++i) EXPECT_EQ(both[i], alone[i]);
+  }
+  EXPECT_EQ(twin.contact_law(Probe{Probe::Shape::kSphere, 3.0}), nullptr);
+  EXPECT_NE(twin.contact_law(Probe{Probe::Shape::kSphere, 5.5}), nullptr);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 4. Superposition.
+
+TEST(TwinExtremes, SimultaneousContactsSuperpose) {
+  const SkinTwin& twin = DefaultTwin();
+  const std::vector<std::pair<Contact, Contact>> pairs = {
+      {Sphere(66, 72.5, 1.0), Sphere(84, 57.5, 2.0)},
+      {Sphere(30, 50, 0.3), Sphere(31, 52, 2.5)},
+      {Sphere(100, 72.5, 1.5), Sphere(100, 72.5, 1.5)},  // same point
+      {Sphere(46.5, 87.5, 10.0), Sphere(46.5, 87.5, 0.05)},
+  };
+  for (const auto& [a, b] : pairs) {
+    std::uint32_t flags = 0;
+    const Shifts sa = Shift(twin, {a}, flags), sb = Shift(twin, {b}, flags), sab = Shift(twin, {a, b}, flags);
+    EXPECT_TRUE(AllFinite(sab));
+    double scale = 0.0;
+    for (std::size_t i = 0; i < kN; ++i) scale = std::max(scale, std::abs(sa[i]) + std::abs(sb[i]));
+    ASSERT_GT(scale, 1.0);  // the contacts do respond
+    for (std::size_t i = 0; i < kN; ++i) EXPECT_NEAR(sab[i], sa[i] + sb[i], 1e-9 * scale) << "grating " << i + 1;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 5. Temperature.
+
+TEST(TwinExtremes, TemperatureExtremesShiftEveryGratingAlike) {
+  for (double dt : {40.0, -40.0}) {
+    TwinEffects e;
+    e.temperature = TemperatureEffect{};
+    e.temperature->offset_c = dt;
+    const SkinTwin twin = TwinWith(e);
+    const double band_pm = twin.spec().fibre.band_half_width_nm * 1e3;
+    InterrogatorSim sim(twin, 21);
+    std::array<double, kN> first{};
+    for (double t : {0.0, 0.01, 1.0, 150.0, 300.0, 1234.5, 1e5}) {
+      std::array<double, kN> wl{};
+      std::uint32_t flags = 0;
+      sim.Read(t, Shifts{}, wl, flags);
+      EXPECT_EQ(flags, 0u) << "dT " << dt << " t " << t;
+      for (std::size_t i = 0; i < kN; ++i) {
+        const double shift = (wl[i] - twin.reference_wavelength_nm()[i]) * 1e3;
+        ASSERT_TRUE(std::isfinite(shift));
+        EXPECT_NEAR(shift, twin.temperature_pm_per_c()[i] * dt, 1e-6);
+        // about 10 pm/C * (1 +- 4 sigma of 3 %) * 40 C = 400 pm +- 48
+        EXPECT_GE(std::abs(shift), 10.0 * (1 - 4 * 0.03) * 40.0) << "grating " << i + 1;
+        EXPECT_LE(std::abs(shift), 10.0 * (1 + 4 * 0.03) * 40.0) << "grating " << i + 1;
+        EXPECT_EQ(std::signbit(shift), std::signbit(dt));
+        EXPECT_LT(std::abs(shift), band_pm);
+        if (t == 0.0) {
+          first[i] = wl[i];
+        } else {
+          EXPECT_EQ(wl[i], first[i]) << "no amplitude or ramp: constant";
+        }
+      }
+    }
+  }
+}
+
+TEST(TwinExtremes, TemperatureCoefficientsSpreadAroundTenPmPerDegree) {
+  TwinEffects e;
+  e.temperature = TemperatureEffect{};
+  const SkinTwin twin = TwinWith(e);
+  const auto& tc = twin.temperature_pm_per_c();
+  const auto [lo, hi] = std::minmax_element(tc.begin(), tc.end());
+  EXPECT_GT(*hi - *lo, 0.01) << "coefficients must differ between gratings";
+  for (double c : tc) {
+    EXPECT_GE(c, 10.0 * (1 - 4 * 0.03));
+    EXPECT_LE(c, 10.0 * (1 + 4 * 0.03));
+  }
+  // A time-varying temperature moves the reading with time.
+  e.temperature->amplitude_c = 5.0;
+  e.temperature->period_s = 100.0;
+  const SkinTwin varying = TwinWith(e);
+  InterrogatorSim sim(varying, 1);
+  EXPECT_EQ(sim.TemperatureC(0.0), 0.0);
+  EXPECT_NEAR(sim.TemperatureC(25.0), 5.0, 1e-9);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 6. Faults.
+
+TEST(TwinExtremes, DeadGratingIsAlwaysMissing) {
+  TwinEffects e;
+  e.noise = NoiseEffect{0.3};
+  e.faults.push_back(FaultEffect{5, FaultEffect::Kind::kDead, 0.0, 1.0});
+  const SkinTwin twin = TwinWith(e);
+  InterrogatorSim sim(twin, 31);
+  const Shifts touch = PlainTwin().StrainShiftsPm(Sphere(46.5, 57.5, 1.0));  // on FBG 5
+  for (int k = 0; k < 500; ++k) {
+    std::array<double, kN> wl{};
+    std::uint32_t flags = 0;
+    sim.Read(k * 0.01, k % 2 ? touch : Shifts{}, wl, flags);
+    EXPECT_TRUE(flags & kPeakMissing);
+    for (std::size_t i = 0; i < kN; ++i) {
+      if (i == 4) {
+        ASSERT_TRUE(std::isnan(wl[i])) << "frame " << k;
+      } else {
+        ASSERT_TRUE(std::isfinite(wl[i])) << "grating " << i + 1 << " frame " << k;
+      }
+    }
+  }
+}
+
+TEST(TwinExtremes, DimmedGratingDropsOutAboutHalfTheTimeAndIsNoisier) {
+  TwinEffects e;
+  e.noise = NoiseEffect{0.3};
+  e.faults.push_back(FaultEffect{9, FaultEffect::Kind::kDimmed, 0.5, 4.0});
+  const SkinTwin twin = TwinWith(e);
+  InterrogatorSim sim(twin, 32);
+  const int frames = 2000;
+  int missing = 0, flagged = 0;
+  double s2_dim = 0.0, s2_ok = 0.0;
+  int n_dim = 0, n_ok = 0;
+  for (int k = 0; k < frames; ++k) {
+    std::array<double, kN> wl{};
+    std::uint32_t flags = 0;
+    sim.Read(k * 0.01, Shifts{}, wl, flags);
+    flagged += (flags & kPeakMissing) ? 1 : 0;
+    for (std::size_t i = 0; i < kN; ++i) {
+      if (i == 8) continue;
+      ASSERT_TRUE(std::isfinite(wl[i]));
+    }
+    if (std::isnan(wl[8])) {
+      ++missing;
+    } else {
+      const double d = (wl[8] - twin.reference_wavelength_nm()[8]) * 1e3;
+      s2_dim += d * d;
+      ++n_dim;
+    }
+    const double h = (wl[3] - twin.reference_wavelength_nm()[3]) * 1e3;
+    s2_ok += h * h;
+    ++n_ok;
+  }
+  // Binomial(2000, 0.5): mean 1000, sd 22.4; +-5 sd.
+  EXPECT_GE(missing, 888);
+  EXPECT_LE(missing, 1112);
+  EXPECT_EQ(flagged, missing);
+  const double sd_dim = std::sqrt(s2_dim / n_dim), sd_ok = std::sqrt(s2_ok / n_ok);
+  EXPECT_GT(sd_dim, 2.0 * sd_ok) << "dimmed " << sd_dim << " pm, healthy " << sd_ok << " pm";
+  EXPECT_NEAR(sd_dim, 1.2, 0.15);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 7. Skin samples.
+
+TEST(TwinExtremes, SkinSamplesDifferBySeedAndRepeatBySeed) {
+  const SkinTwin& a = SampleTwin(1);
+  const SkinTwin& b = SampleTwin(2);
+  const SkinTwin a2(Spec(), a.effects(), {5.5});  // same seed, built again
+  const double pos = a.effects().skin_sample->position_mm;
+  const Contact touch = Sphere(66, 72.5, 1.0);
+  const Shifts sa = a.StrainShiftsPm(touch), sb = b.StrainShiftsPm(touch), sa2 = a2.StrainShiftsPm(touch);
+
+  EXPECT_NE(a.layer_thickness_mm(), b.layer_thickness_mm());
+  EXPECT_EQ(a.layer_thickness_mm(), a2.layer_thickness_mm());
+  int centres_differ = 0, shifts_differ = 0;
+  for (std::size_t i = 0; i < kN; ++i) {
+    const auto& design = Spec().gratings[i].centre;
+    for (const SkinTwin* t : {&a, &b}) {
+      EXPECT_LE(t->geometry().SurfaceDistanceMm(t->grating_centres()[i], design), pos + 1e-9) << "grating " << i + 1;
+    }
+    const auto &ca = a.grating_centres()[i], &cb = b.grating_centres()[i], &ca2 = a2.grating_centres()[i];
+    centres_differ += (ca.y_mm != cb.y_mm || ca.r_deg != cb.r_deg) ? 1 : 0;
+    EXPECT_EQ(ca.y_mm, ca2.y_mm);
+    EXPECT_EQ(ca.r_deg, ca2.r_deg);
+    EXPECT_EQ(a.reference_wavelength_nm()[i], a2.reference_wavelength_nm()[i]);
+    EXPECT_EQ(sa[i], sa2[i]);
+    shifts_differ += sa[i] != sb[i] ? 1 : 0;
+  }
+  EXPECT_EQ(centres_differ, static_cast<int>(kN));
+  EXPECT_GT(shifts_differ, 0);
+  EXPECT_GT(std::abs(sa[6] - sb[6]), 0.01 * std::abs(sa[6])) << "FBG 7 under the touch";
+  EXPECT_NE(a.reference_wavelength_nm(), b.reference_wavelength_nm());
+}
+
+TEST(TwinExtremes, WithoutASkinSampleTheDesignIsExact) {
+  const SkinTwin& twin = PlainTwin();
+  EXPECT_EQ(twin.layer_thickness_mm(), Spec().layer.thickness_mm);
+  for (std::size_t i = 0; i < kN; ++i) {
+    EXPECT_EQ(twin.grating_centres()[i].y_mm, Spec().gratings[i].centre.y_mm);
+    EXPECT_EQ(twin.grating_centres()[i].r_deg, Spec().gratings[i].centre.r_deg);
+    EXPECT_EQ(twin.reference_wavelength_nm()[i], Spec().gratings[i].wavelength_nm);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 8. Where the response peaks.
+
+TEST(TwinExtremes, ContactOnAGratingRespondsMostOnThatGrating) {
+  const SkinTwin& twin = PlainTwin();
+  for (double f : {0.5, 2.5}) {
+    for (std::size_t g = 0; g < kN; ++g) {
+      const auto& c = twin.spec().gratings[g].centre;
+      const Shifts s = twin.StrainShiftsPm(Sphere(c.y_mm, c.r_deg, f));
+      const auto hot = static_cast<std::size_t>(std::max_element(s.begin(), s.end()) - s.begin());
+      EXPECT_EQ(hot, g) << f << " N on grating " << g + 1;
+      EXPECT_GT(s[g], 0.0);
+      for (std::size_t j = 0; j < kN; ++j) {
+        if (j != g) {
+          EXPECT_GT(s[g], std::abs(s[j])) << f << " N on " << g + 1 << " vs " << j + 1;
+        }
+      }
+    }
+  }
+}
+
+TEST(TwinExtremes, ResponseGrowsWithForce) {
+  for (const SkinTwin* twin : {&PlainTwin(), &DefaultTwin()}) {
+    for (std::size_t g = 0; g < kN; ++g) {
+      const auto& c = twin->grating_centres()[g];
+      const double s05 = twin->StrainShiftsPm(Sphere(c.y_mm, c.r_deg, 0.5))[g];
+      const double s1 = twin->StrainShiftsPm(Sphere(c.y_mm, c.r_deg, 1.0))[g];
+      const double s2 = twin->StrainShiftsPm(Sphere(c.y_mm, c.r_deg, 2.0))[g];
+      EXPECT_GT(s05, 0.0) << "grating " << g + 1;
+      EXPECT_GT(s1, s05) << "grating " << g + 1;
+      EXPECT_GT(s2, s1) << "grating " << g + 1;
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 9. Effects not named are not built.
+
+TEST(TwinExtremes, UnnamedEffectsAreNotBuilt) {
+  const TwinEffects none;
+  EXPECT_EQ(none.Summary(), "none");
+  EXPECT_EQ(none.fabrication_seed(), 0u);
+  const SkinTwin& twin = PlainTwin();
+  for (std::size_t i = 0; i < kN; ++i) {
+    EXPECT_EQ(twin.gain()[i], 1.0);
+    EXPECT_EQ(twin.temperature_pm_per_c()[i], 0.0);
+  }
+  InterrogatorSim sim(twin, 1);
+  EXPECT_EQ(sim.TemperatureC(100.0), 0.0);
+  // Named effects are built: the default scene's gain spread moves the gains.
+  const SkinTwin& full = DefaultTwin();
+  EXPECT_NE(full.effects().Summary(), "none");
+  int not_one = 0;
+  for (double g : full.gain()) not_one += g != 1.0 ? 1 : 0;
+  EXPECT_EQ(not_one, static_cast<int>(kN));
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 10. Effects naming a grating that does not exist.
+
+TEST(TwinExtremes, EffectsNamingAMissingGratingThrow) {
+  for (int g : {0, 17, -1}) {
+    TwinEffects fault;
+    fault.faults.push_back(FaultEffect{g, FaultEffect::Kind::kDead, 0.0, 1.0});
+    EXPECT_THROW((void)TwinWith(fault), InputError) << "fault on grating " << g;
+    TwinEffects irregular;
+    irregular.irregular = IrregularEffect{{IrregularGrating{g, {Lobe{}}}}};
+    EXPECT_THROW((void)TwinWith(irregular), InputError) << "irregular grating " << g;
+  }
+  TwinEffects ok;
+  ok.faults.push_back(FaultEffect{16, FaultEffect::Kind::kDead, 0.0, 1.0});
+  ok.faults.push_back(FaultEffect{1, FaultEffect::Kind::kDimmed, 0.2, 4.0});
+  EXPECT_NO_THROW((void)TwinWith(ok));
+}
+
+}  // namespace
+}  // namespace ruffini::twin
