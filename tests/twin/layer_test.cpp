@@ -7,6 +7,15 @@
 namespace ruffini::twin {
 namespace {
 
+TEST(LayerTest, FastBesselMatchesTheLibrary) {
+  for (double x = 0.0; x < 400.0; x += 0.0137) {
+    double j0 = 0, j1 = 0;
+    BesselJ01(x, j0, j1);
+    ASSERT_NEAR(j0, std::cyl_bessel_j(0.0, x), 2e-7) << x;
+    ASSERT_NEAR(j1, std::cyl_bessel_j(1.0, x), 2e-7) << x;
+  }
+}
+
 // In the half-space limit the bonded-layer solution must reproduce Boussinesq's point-load strains.
 TEST(LayerTest, ThickLayerMatchesBoussinesq) {
   LayerParams thick{400.0, 4.0, 152.0, 0.49};

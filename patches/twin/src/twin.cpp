@@ -142,6 +142,10 @@ SkinTwin::SkinTwin(const patch::PatchSpec& spec, const TwinEffects& effects, std
     law_radii_mm_.push_back(r);
     laws_.emplace_back(thickness_mm_, spec.layer.material.youngs_modulus_kpa, spec.layer.material.poisson_ratio, r);
   }
+  // Point-like probes saturate where the paper's 11 mm sphere does (a conservative, documented choice).
+  point_force_limit_n_ = ContactLaw(thickness_mm_, spec.layer.material.youngs_modulus_kpa,
+                                    spec.layer.material.poisson_ratio, 5.5)
+                             .linear_limit_force_n();
 
   const double pm_per_strain = spec.fibre.strain_optic_pm_per_microstrain * 1e6;
   for (std::size_t i = 0; i < patch::kGratings; ++i) {
@@ -199,17 +203,24 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
     if (c.force_n == 0.0) continue;
     double radius = c.probe.radius_mm;
     double depth = 0.0;
+    double force = c.force_n;
     if (c.probe.shape == Probe::Shape::kSphere) {
       const ContactLaw* law = contact_law(c.probe);
       if (law == nullptr) {
         flags |= kBadContact;
         continue;
       }
-      depth = law->DepthMm(c.force_n);
+      if (force > law->linear_limit_force_n()) {
+        force = law->linear_limit_force_n();
+        flags |= kSaturated;
+      }
+      depth = law->DepthMm(force);
       radius = std::min(c.probe.radius_mm, std::sqrt(c.probe.radius_mm * depth));
-      if (depth >= law->max_depth_mm()) flags |= kSaturated;  // layer crushed: beyond the model
+    } else if (force > point_force_limit_n_) {
+      force = point_force_limit_n_;
+      flags |= kSaturated;
     }
-    const double f = c.force_n * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
+    const double f = force * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
     const double cr = c.at.r_deg * patch::kDegToRad;
     for (std::size_t i = 0; i < patch::kGratings; ++i) {
       double acc = 0.0;

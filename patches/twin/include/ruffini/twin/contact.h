@@ -24,6 +24,10 @@ class ContactLaw {
   [[nodiscard]] double DepthMm(double force_n) const noexcept;
   [[nodiscard]] double ContactRadiusMm(double force_n) const noexcept;
   [[nodiscard]] double max_depth_mm() const noexcept { return max_depth_mm_; }
+  // Beyond 30 % nominal compression (depth / thickness) linear elasticity no longer describes the layer:
+  // the twin saturates the response at this force and flags the frame.
+  static constexpr double kLinearCompressionLimit = 0.3;
+  [[nodiscard]] double linear_limit_force_n() const noexcept { return ForceN(kLinearCompressionLimit * h_); }
 
  private:
   double h_, e_eff_mpa_, radius_, alpha_, beta_;

@@ -39,6 +39,9 @@ struct StrainProfile {
 std::vector<StrainProfile> ComputeStrainProfiles(const LayerParams& layer, const std::vector<double>& contact_radii_mm,
                                                  double r_max_mm, double dr_mm);
 
+// Bessel functions J0(x), J1(x) (Abramowitz & Stegun 9.4, |error| < 1e-7).
+void BesselJ01(double x, double& j0, double& j1) noexcept;
+
 // Boussinesq (elastic half-space, point load F = 1 N) strains at depth z and radius r, for tests.
 struct BoussinesqStrain {
   double eps_rr, eps_tt;

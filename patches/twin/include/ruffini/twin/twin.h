@@ -55,7 +55,9 @@ class SkinTwin {
 
   // Noise-free strain shifts (pm) of the 16 gratings for a set of simultaneous contacts; contributions
   // superpose. A contact outside the patch contributes nothing and sets kOffPatch; a non-finite or
-  // negative force contributes nothing and sets kBadContact. No clipping here (InterrogatorSim clips).
+  // negative force contributes nothing and sets kBadContact. A force beyond the layer's linear range
+  // (indentation > 30 % of the thickness: about 4 N for the 11 mm sphere) saturates the response at that
+  // force and sets kSaturated. InterrogatorSim further clips each peak to its band.
   // Real-time safe: no allocation, no lock, no throw.
   void StrainShiftsPm(std::span<const Contact> contacts, Shifts& shift_pm, std::uint32_t& flags) const noexcept;
   [[nodiscard]] Shifts StrainShiftsPm(const Contact& c) const noexcept;
@@ -98,6 +100,7 @@ class SkinTwin {
   std::shared_ptr<const KernelTables> tables_;  // shared between twins with the same layer (cache)
   std::vector<double> law_radii_mm_;
   std::vector<ContactLaw> laws_;                // one per sphere radius
+  double point_force_limit_n_ = 0.0;            // saturation force for point-like probes
 };
 
 // Per-stream interrogator state: turns strain shifts into the peak wavelengths an interrogator reports
