@@ -33,7 +33,8 @@ struct SceneArgs {
 void AddSceneOptions(CLI::App* cmd, SceneArgs& a) {
   cmd->add_option("--scene", a.scene, "Scene file (YAML)")->capture_default_str();
   cmd->add_option("--patch", a.patch, "Patch of the scene to use (default: the only one)");
-  cmd->add_option("--skin-sample", a.skin_sample, "Skin sample (cast) seed; overrides the scene's");
+  cmd->add_option("--skin-sample", a.skin_sample, "Skin sample (cast) seed; overrides the scene's")
+      ->check(CLI::Range(0.0, 1099511627776.0));
 }
 
 twin::Scene LoadSceneArgs(const SceneArgs& a) {
@@ -69,7 +70,8 @@ void RegisterSimulate(CLI::App& app) {
   cmd->add_option("--protocol", args->protocol, "paper | vonfrey | receptive-field")
       ->check(CLI::IsMember({"paper", "vonfrey", "receptive-field"}))
       ->capture_default_str();
-  cmd->add_option("--seed", args->seed, "Seed: the same seed gives a bit-identical file")->capture_default_str();
+  cmd->add_option("--seed", args->seed, "Seed: the same seed gives a bit-identical file")
+      ->check(CLI::NonNegativeNumber)->capture_default_str();
   cmd->add_option("--indentations", args->indentations, "paper: number of indentations (default 2700)")
       ->check(CLI::Range(1, 1000000));
   cmd->add_option("--step-mm", args->step_mm, "receptive-field: grid step")->check(CLI::Range(0.2, 50.0))->capture_default_str();
@@ -169,7 +171,10 @@ void RegisterTwinReport(CLI::App& app) {
     if (bar) bar->Finish();
     std::fputs(twin::FormatReport(r).c_str(), stdout);
     if (!args->json.empty()) {
-      std::ofstream(args->json) << twin::ReportJson(r);
+      std::ofstream out(args->json);
+      out << twin::ReportJson(r);
+      out.close();
+      if (!out) throw InputError(args->json + ": cannot write the JSON report");
       std::printf("\nwrote %s\n", args->json.c_str());
     }
     if (!args->no_figures) {

@@ -147,3 +147,21 @@ TEST(SpecTest, MissingFileIsAClearError) {
 
 }  // namespace
 }  // namespace ruffini::patch
+
+namespace ruffini::patch {
+namespace {
+
+TEST(SpecTest, RejectsDuplicateAndComplexKeys) {
+  EXPECT_NE(LoadError("surface_radius_mm: 37.4", "surface_radius_mm: 37.4\nsurface_radius_mm: 40").find("'surface_radius_mm' appears twice"),
+            std::string::npos);
+  EXPECT_NE(LoadError("surface_radius_mm: 37.4", "surface_radius_mm: 37.4\n? [a, b]\n: 1").find("is not a plain name"),
+            std::string::npos);
+}
+
+TEST(SpecTest, GratingsShareOneLength) {
+  const std::string e = LoadError("length_mm: 8, wavelength_nm: 1532.3}", "length_mm: 10, wavelength_nm: 1532.3}");
+  EXPECT_NE(e.find("'gratings[1].length_mm' (10) must equal gratings[0].length_mm (8 mm)"), std::string::npos) << e;
+}
+
+}  // namespace
+}  // namespace ruffini::patch

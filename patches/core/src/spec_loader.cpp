@@ -109,6 +109,10 @@ PatchSpec ParsePatchSpec(const std::string& yaml_text, const std::string& source
     }
     out.direction_deg = g.Number("direction_deg", -360.0, 360.0);
     out.length_mm = g.Number("length_mm", 1.0, 30.0);
+    if (k > 0 && out.length_mm != s.gratings[0].length_mm) {
+      g.Fail("length_mm", "must equal gratings[0].length_mm (" + FormatNumber(s.gratings[0].length_mm) +
+                              " mm): the twin shares one response table between gratings");
+    }
     out.wavelength_nm = g.Number("wavelength_nm", -kInf, kInf);
     if (out.wavelength_nm - hw < lo || out.wavelength_nm + hw > hi) {
       g.Fail("wavelength_nm", "with its band of +-" + FormatNumber(hw) + " nm must lie inside the interrogator window " +

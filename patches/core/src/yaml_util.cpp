@@ -41,7 +41,20 @@ YamlReader YamlReader::LoadFile(const std::string& path) {
 }
 
 YamlReader::YamlReader(YAML::Node node, std::string source, std::string path)
-    : node_(std::move(node)), source_(std::move(source)), path_(std::move(path)) {}
+    : node_(std::move(node)), source_(std::move(source)), path_(std::move(path)) {
+  if (!node_.IsMap()) return;
+  std::set<std::string> seen;
+  for (auto it = node_.begin(); it != node_.end(); ++it) {
+    if (!it->first.IsScalar()) {
+      throw InputError(MarkString(source_, it->first.Mark()) + ": a key in '" + (path_.empty() ? "(top)" : path_) +
+                       "' is not a plain name");
+    }
+    if (!seen.insert(it->first.Scalar()).second) {
+      // yaml-cpp would keep one of two equal keys; a config that says a thing twice is an error.
+      throw InputError(MarkString(source_, it->first.Mark()) + ": '" + KeyPath(it->first.Scalar()) + "' appears twice");
+    }
+  }
+}
 
 std::string YamlReader::KeyPath(const std::string& key) const {
   if (path_.empty()) return key;
@@ -52,7 +65,7 @@ std::string YamlReader::KeyPath(const std::string& key) const {
 std::string YamlReader::Where(const std::string& key) const {
   if (!key.empty() && node_.IsMap()) {
     for (auto it = node_.begin(); it != node_.end(); ++it) {
-      if (it->first.as<std::string>() == key) return MarkString(source_, it->first.Mark());
+      if (it->first.IsScalar() && it->first.Scalar() == key) return MarkString(source_, it->first.Mark());
     }
   }
   return MarkString(source_, node_.Mark());
@@ -185,7 +198,7 @@ std::vector<double> YamlReader::Numbers(const std::string& key, double min, doub
 void YamlReader::Finish() const {
   if (!node_.IsMap()) return;
   for (auto it = node_.begin(); it != node_.end(); ++it) {
-    const auto key = it->first.as<std::string>();
+    const std::string& key = it->first.Scalar();
     if (!read_.count(key)) {
       throw InputError(MarkString(source_, it->first.Mark()) + ": '" + KeyPath(key) +
                        "' is not a known key here");

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "ruffini/error.h"
+#include "ruffini/yaml_reader.h"  // FormatNumber
 
 namespace ruffini::dataset {
 namespace {
@@ -38,12 +39,6 @@ Parse ParseNumber(std::string_view s, double& value) {
   if (ec == std::errc::result_out_of_range && ptr == last) return Parse::kOutOfRange;
   if (ec != std::errc() || ptr != last) return Parse::kNotANumber;
   return Parse::kOk;
-}
-
-std::string FormatNumber(double v) {
-  char buffer[64];
-  const auto [ptr, ec] = std::to_chars(buffer, buffer + sizeof(buffer), v);
-  return ec == std::errc() ? std::string(buffer, ptr) : std::string("?");
 }
 
 class CsvImporter {
@@ -99,6 +94,10 @@ class CsvImporter {
       throw InputError(path_ + ": need at least 2 data rows to find the sample rate, found " + std::to_string(n));
     }
     data.info.sample_rate_hz = 1.0 / MedianStep(data.t_s);
+    if (!(data.info.sample_rate_hz >= 1e-3 && data.info.sample_rate_hz <= 1e7)) {
+      throw InputError(path_ + ": the median time step gives " + FormatNumber(data.info.sample_rate_hz) +
+                       " Hz; expected 0.001 Hz to 10 MHz (is the time column in seconds?)");
+    }
     AssignIndentations(data);
     return data;
   }
@@ -154,6 +153,16 @@ class CsvImporter {
     return value;
   }
 
+  // A label cell: empty = unknown; otherwise it must fit the f32 column with a physical magnitude.
+  double Label(std::size_t line_no, std::size_t column, const char* what, double max_abs) {
+    const double v = Cell(line_no, column, true, what);
+    if (std::abs(v) > max_abs) {
+      Fail(line_no, "column " + std::to_string(column + 1) + " (" + what + ") " + FormatNumber(v) +
+                        " is outside -" + FormatNumber(max_abs) + ".." + FormatNumber(max_abs));
+    }
+    return v;
+  }
+
   void AddRow(std::size_t line_no, Dataset& data) {
     Frame f;
     f.t_s = Cell(line_no, 0, false, "time");
@@ -162,9 +171,9 @@ class CsvImporter {
                         " s on line " + std::to_string(previous_line_) + "; time must be strictly increasing");
     }
     for (std::size_t k = 0; k < kChannels; ++k) f.wavelength_nm[k] = Cell(line_no, 1 + k, true, "wavelength");
-    const double force = columns_ >= 18 ? Cell(line_no, 17, true, "force") : kNaN;
-    const double y = columns_ == 20 ? Cell(line_no, 18, true, "y_mm") : kNaN;
-    const double r = columns_ == 20 ? Cell(line_no, 19, true, "r_deg") : kNaN;
+    const double force = columns_ >= 18 ? Label(line_no, 17, "force", 1e4) : kNaN;
+    const double y = columns_ == 20 ? Label(line_no, 18, "y_mm", 1e4) : kNaN;
+    const double r = columns_ == 20 ? Label(line_no, 19, "r_deg", 1e4) : kNaN;
     f.force_n = static_cast<float>(force);
     f.y_mm = static_cast<float>(y);
     f.r_deg = static_cast<float>(r);

@@ -45,8 +45,8 @@ double ContactLaw::ForceN(double d) const noexcept {
 double ContactLaw::DepthMm(double force_n) const noexcept {
   if (!(force_n > 0.0)) return 0.0;
   const double x = force_n / df_;
+  if (!(x < static_cast<double>(depth_of_force_.size() - 1))) return max_depth_mm_;  // also catches inf
   const auto i = static_cast<std::size_t>(x);
-  if (i + 1 >= depth_of_force_.size()) return max_depth_mm_;
   const double w = x - static_cast<double>(i);
   return depth_of_force_[i] * (1 - w) + depth_of_force_[i + 1] * w;
 }

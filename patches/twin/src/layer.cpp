@@ -48,21 +48,18 @@ void BesselJ01(double x, double& j0, double& j1) noexcept {
   j1 = s * f1 * std::cos(th1) * (x < 0 ? -1.0 : 1.0);
 }
 
-double StrainProfile::Rr(double r_mm) const noexcept {
-  const double x = r_mm / dr_mm;
+namespace {
+double Interpolate(const std::vector<double>& v, double dr, double r_mm) noexcept {
+  const double x = r_mm / dr;
+  if (!(x >= 0.0 && x < static_cast<double>(v.size()) - 1.0)) return 0.0;
   const auto i = static_cast<std::size_t>(x);
-  if (i + 1 >= eps_rr.size()) return 0.0;
   const double w = x - static_cast<double>(i);
-  return eps_rr[i] * (1 - w) + eps_rr[i + 1] * w;
+  return v[i] * (1 - w) + v[i + 1] * w;
 }
+}  // namespace
 
-double StrainProfile::Tt(double r_mm) const noexcept {
-  const double x = r_mm / dr_mm;
-  const auto i = static_cast<std::size_t>(x);
-  if (i + 1 >= eps_tt.size()) return 0.0;
-  const double w = x - static_cast<double>(i);
-  return eps_tt[i] * (1 - w) + eps_tt[i + 1] * w;
-}
+double StrainProfile::Rr(double r_mm) const noexcept { return Interpolate(eps_rr, dr_mm, r_mm); }
+double StrainProfile::Tt(double r_mm) const noexcept { return Interpolate(eps_tt, dr_mm, r_mm); }
 
 std::vector<StrainProfile> ComputeStrainProfiles(const LayerParams& layer, const std::vector<double>& radii,
                                                  double r_max_mm, double dr_mm) {

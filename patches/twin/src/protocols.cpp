@@ -4,6 +4,8 @@
 #include <limits>
 #include <random>
 
+#include "ruffini/error.h"
+
 namespace ruffini::twin {
 namespace {
 
@@ -17,7 +19,8 @@ class Recorder {
       : twin_(twin), sim_(twin, seed), dt_(1.0 / rate_hz), sink_(sink) {
     block_.reserve(kBlock);
   }
-  ~Recorder() { Flush(); }
+  // No flush here: a sink that threw must not be called again while unwinding. Callers Flush() at the end.
+  ~Recorder() = default;
 
   void Emit(std::span<const Contact> contacts, float force_label, float true_force, float y, float r, int indentation) {
     dataset::Frame f;
@@ -38,8 +41,11 @@ class Recorder {
     if (block_.size() == kBlock) Flush();
   }
   void Flush() {
-    if (!block_.empty()) sink_(block_);
-    block_.clear();
+    if (block_.empty()) return;
+    std::vector<dataset::Frame> out;
+    out.swap(block_);  // if the sink throws, the block is gone and nothing is written twice
+    block_.reserve(kBlock);
+    sink_(out);
   }
   [[nodiscard]] std::uint64_t frames() const { return serial_; }
 
@@ -66,6 +72,16 @@ class LoadCellModel {
   std::mt19937_64 rng_;
   std::normal_distribution<double> normal_{0.0, 1.0};
 };
+
+// The force-controlled protocols move a spherical probe through the contact law; anything else is an error.
+const ContactLaw* RequireSphere(const SkinTwin& twin, const Scene& scene, const char* protocol) {
+  const ContactLaw* law = scene.probe.shape == Probe::Shape::kSphere ? twin.contact_law(scene.probe) : nullptr;
+  if (law == nullptr) {
+    throw InputError(scene.source + ": the " + std::string(protocol) +
+                     " protocol needs a spherical probe the twin was built for (twin.probe.shape: sphere)");
+  }
+  return law;
+}
 
 patch::SurfacePoint UniformIn(const patch::Region& a, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -95,7 +111,7 @@ ProtocolRun RunPaper(const SkinTwin& twin, const Scene& scene, const PaperProtoc
   LoadCellModel cell(scene.load_cell, DeriveSeed(seed, 2));
   std::mt19937_64 rng(DeriveSeed(seed, 3));
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  const ContactLaw* law = twin.contact_law(scene.probe);
+  const ContactLaw* law = RequireSphere(twin, scene, "paper");
   const patch::Region area = twin.spec().indented_area;
 
   for (int i = 0; i < p.rest_frames; ++i) rec.Emit({}, cell.Read(0.0), 0.0f, kNaN, kNaN, -1);
@@ -105,9 +121,7 @@ ProtocolRun RunPaper(const SkinTwin& twin, const Scene& scene, const PaperProtoc
     for (int n = 0;; ++n) {
       const double travel = p.speed_mm_s * n / p.rate_hz - gap;
       const double depth = std::max(0.0, travel);
-      const double force = (law != nullptr && scene.probe.shape == Probe::Shape::kSphere)
-                               ? law->ForceN(depth)
-                               : depth;  // a point probe has no contact law: 1 N per mm (never used by scenes)
+      const double force = law->ForceN(depth);
       if (force > p.max_force_n) break;  // only the increasing-load phase is kept
       const Contact c{at, force, scene.probe};
       rec.Emit(std::span<const Contact>(&c, 1), cell.Read(force), static_cast<float>(force),
@@ -165,6 +179,7 @@ ProtocolRun RunReceptiveField(const SkinTwin& twin, const Scene& scene, const Re
                               std::uint64_t seed, const FrameSink& sink, const ProgressFn& progress) {
   Recorder rec(twin, DeriveSeed(seed, 1), p.rate_hz, sink);
   LoadCellModel cell(scene.load_cell, DeriveSeed(seed, 2));
+  (void)RequireSphere(twin, scene, "receptive-field");
   const patch::Region area = twin.spec().indented_area;
   const patch::Geometry& geo = twin.geometry();
   const double arc0 = geo.ArcMm(area.r_min_deg), arc1 = geo.ArcMm(area.r_max_deg);

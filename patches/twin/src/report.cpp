@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <deque>
+#include <limits>
 #include <map>
 #include <sstream>
 
@@ -173,6 +174,11 @@ DetectionFit FitDetection(std::vector<DetectionPoint> points) {
   fit.a_per_n = std::exp(p[0]);
   fit.b_n = p[1];
   fit.threshold75_n = fit.b_n + std::log(3.0) / fit.a_per_n;
+  // The fit can't place a 75 % point the data never reaches.
+  const double max_rate = std::max_element(points.begin(), points.end(), [](const auto& a, const auto& b) {
+                            return a.rate() < b.rate();
+                          })->rate();
+  if (max_rate < 0.75) fit.threshold75_n = std::numeric_limits<double>::quiet_NaN();
   fit.converged = status == Eigen::LevenbergMarquardtSpace::RelativeReductionTooSmall ||
                   status == Eigen::LevenbergMarquardtSpace::RelativeErrorTooSmall ||
                   status == Eigen::LevenbergMarquardtSpace::RelativeErrorAndReductionTooSmall ||
@@ -183,8 +189,7 @@ DetectionFit FitDetection(std::vector<DetectionPoint> points) {
 DetectionFit MeasureDetection(const SkinTwin& twin, const VonFreyProtocol& p, std::uint64_t seed, double detect_pm,
                               const ProgressFn& progress) {
   // Streamed: a baseline per grating from each rest block, then any excursion > detect_pm during the touch.
-  std::array<double, patch::kGratings> sum{}, base{};
-  int rest_n = 0;
+  std::array<double, patch::kGratings> sum{}, base{}, count{};
   int current = -1;
   bool detected = false;
   double nominal = 0.0;
@@ -204,17 +209,21 @@ DetectionFit MeasureDetection(const SkinTwin& twin, const VonFreyProtocol& p, st
           close();
           current = -1;
           sum.fill(0.0);
-          rest_n = 0;
+          count.fill(0.0);
         }
-        for (std::size_t i = 0; i < patch::kGratings; ++i) sum[i] += std::isnan(f.wavelength_nm[i]) ? 0.0 : f.wavelength_nm[i];
-        ++rest_n;
+        for (std::size_t i = 0; i < patch::kGratings; ++i) {
+          if (std::isnan(f.wavelength_nm[i])) continue;  // a missing peak says nothing about the baseline
+          sum[i] += f.wavelength_nm[i];
+          count[i] += 1.0;
+        }
         continue;
       }
       if (f.indentation != current) {
         current = f.indentation;
         detected = false;
         nominal = 0.0;
-        for (std::size_t i = 0; i < patch::kGratings; ++i) base[i] = rest_n ? sum[i] / rest_n : 0.0;
+        // No baseline for a grating (peak missing through the whole rest): NaN, so it never detects.
+        for (std::size_t i = 0; i < patch::kGratings; ++i) base[i] = count[i] > 0 ? sum[i] / count[i] : std::nan("");
       }
       nominal = std::max(nominal, static_cast<double>(f.true_force_n));
       for (std::size_t i = 0; i < patch::kGratings; ++i) {
@@ -362,10 +371,12 @@ std::string FormatReport(const TwinReport& r) {
   const double med25 = stats::Median(c25);
   line("T3 neighbours > 2 pm at 2.5 N (min / median)", std::to_string(min25) + " / " + Fmt("%.1f", med25),
        ">= 3 (several)", min25 >= 3 ? "ok" : "OUT (see note)");
-  line("T1 75 % detection, uniform random sites", Fmt("%.0f mN", r.detection_uniform.threshold75_n * 1e3), "50.6 mN",
-       "measured (see note)");
-  line("T1 75 % detection, sites <= 3 mm from a FBG", Fmt("%.0f mN", r.detection_near_grating.threshold75_n * 1e3),
-       "50.6 mN", "measured (see note)");
+  auto t1 = [&](const DetectionFit& f) {
+    if (!std::isfinite(f.threshold75_n)) return std::string("not reached");
+    return Fmt("%.0f mN", f.threshold75_n * 1e3) + (f.converged ? "" : " (step-like)");
+  };
+  line("T1 75 % detection, uniform random sites", t1(r.detection_uniform), "50.6 mN", "measured (see note)");
+  line("T1 75 % detection, sites <= 3 mm from a FBG", t1(r.detection_near_grating), "50.6 mN", "measured (see note)");
   const ProtocolStats& p = r.paper;
   line("paper: frames (indentations)", std::to_string(p.frames) + " (" + std::to_string(p.indentations) + ")",
        ">= 2.7 M (2700)", p.indentations >= 2700 && p.frames >= 2700000 ? "ok" : "subset");
@@ -422,22 +433,30 @@ std::string ReportJson(const TwinReport& r) {
   // dependency set, and protobuf's printer would need a schema for a report that grows with each issue).
   std::ostringstream o;
   o.precision(10);
+  // JSON has no NaN or Infinity: write null.
+  auto num = [](double v) {
+    if (!std::isfinite(v)) return std::string("null");
+    std::ostringstream s;
+    s.precision(10);
+    s << v;
+    return s.str();
+  };
   auto fit = [&](const DetectionFit& f) {
-    o << "{\"threshold75_n\": " << f.threshold75_n << ", \"a_per_n\": " << f.a_per_n << ", \"b_n\": " << f.b_n
+    o << "{\"threshold75_n\": " << num(f.threshold75_n) << ", \"a_per_n\": " << num(f.a_per_n) << ", \"b_n\": " << num(f.b_n)
       << ", \"converged\": " << (f.converged ? "true" : "false") << ", \"points\": [";
     for (std::size_t k = 0; k < f.points.size(); ++k) {
-      o << (k ? ", " : "") << "{\"force_n\": " << f.points[k].force_n << ", \"stimulations\": " << f.points[k].stimulations
+      o << (k ? ", " : "") << "{\"force_n\": " << num(f.points[k].force_n) << ", \"stimulations\": " << f.points[k].stimulations
         << ", \"detected\": " << f.points[k].detected << "}";
     }
     o << "]}";
   };
   o << "{\n  \"scene\": \"" << r.scene << "\",\n  \"seed\": " << r.seed << ",\n  \"effects\": \"" << r.effects
-    << "\",\n  \"strain_transfer\": " << r.strain_transfer << ",\n";
-  o << "  \"t2_hot_spot_mm2\": {\"median\": " << r.hot_spot_median_mm2 << ", \"q1\": " << r.hot_spot_q1_mm2
-    << ", \"q3\": " << r.hot_spot_q3_mm2 << ", \"target_median\": 15.9, \"target_q1\": 9.0, \"target_q3\": 20.9, \"per_grating\": [";
+    << "\",\n  \"strain_transfer\": " << num(r.strain_transfer) << ",\n";
+  o << "  \"t2_hot_spot_mm2\": {\"median\": " << num(r.hot_spot_median_mm2) << ", \"q1\": " << num(r.hot_spot_q1_mm2)
+    << ", \"q3\": " << num(r.hot_spot_q3_mm2) << ", \"target_median\": 15.9, \"target_q1\": 9.0, \"target_q3\": 20.9, \"per_grating\": [";
   for (std::size_t i = 0; i < patch::kGratings; ++i) {
-    o << (i ? ", " : "") << "{\"area_mm2\": " << r.hot_spots[i].area_mm2 << ", \"areas\": " << r.hot_spots[i].areas
-      << ", \"peak_pm_per_n\": " << r.hot_spots[i].peak_pm_per_n << "}";
+    o << (i ? ", " : "") << "{\"area_mm2\": " << num(r.hot_spots[i].area_mm2) << ", \"areas\": " << r.hot_spots[i].areas
+      << ", \"peak_pm_per_n\": " << num(r.hot_spots[i].peak_pm_per_n) << "}";
   }
   o << "]},\n  \"t3_neighbours_over_2pm\": {\"at_1n\": [";
   for (std::size_t i = 0; i < patch::kGratings; ++i) o << (i ? ", " : "") << r.crosstalk_1n[i];
@@ -449,15 +468,15 @@ std::string ReportJson(const TwinReport& r) {
   fit(r.detection_near_grating);
   const auto& p = r.paper;
   o << ",\n  \"t1_target_n\": 0.0506,\n  \"paper_protocol\": {\"frames\": " << p.frames << ", \"indentations\": " << p.indentations
-    << ", \"frames_per_indentation\": " << p.frames_per_indentation << ", \"median_force_n\": " << p.median_force_n
-    << ", \"rg_force_error_median_n\": " << p.rg_force_error_median_n << ", \"rg_force_error_iqr_n\": " << p.rg_force_error_iqr_n
-    << ", \"rg_location_error_median_mm\": " << p.rg_location_error_median_mm
-    << ", \"rg_location_error_iqr_mm\": " << p.rg_location_error_iqr_mm
-    << ", \"fraction_before_contact\": " << p.fraction_before_contact
-    << ", \"median_force_above_50mn_n\": " << p.median_force_above_50mn_n
-    << ", \"peak_shift_at_max_force_pm\": " << p.peak_shift_at_max_force_pm << "},\n";
-  o << "  \"hot_spot_shift_pm_at_0.05_0.42_2.5_n\": [" << r.hot_spot_shift_pm[0] << ", " << r.hot_spot_shift_pm[1] << ", "
-    << r.hot_spot_shift_pm[2] << "],\n";
+    << ", \"frames_per_indentation\": " << num(p.frames_per_indentation) << ", \"median_force_n\": " << num(p.median_force_n)
+    << ", \"rg_force_error_median_n\": " << num(p.rg_force_error_median_n) << ", \"rg_force_error_iqr_n\": " << num(p.rg_force_error_iqr_n)
+    << ", \"rg_location_error_median_mm\": " << num(p.rg_location_error_median_mm)
+    << ", \"rg_location_error_iqr_mm\": " << num(p.rg_location_error_iqr_mm)
+    << ", \"fraction_before_contact\": " << num(p.fraction_before_contact)
+    << ", \"median_force_above_50mn_n\": " << num(p.median_force_above_50mn_n)
+    << ", \"peak_shift_at_max_force_pm\": " << num(p.peak_shift_at_max_force_pm) << "},\n";
+  o << "  \"hot_spot_shift_pm_at_0.05_0.42_2.5_n\": [" << num(r.hot_spot_shift_pm[0]) << ", " << num(r.hot_spot_shift_pm[1]) << ", "
+    << num(r.hot_spot_shift_pm[2]) << "],\n";
   o << "  \"gratings_over_2pm_at_0.05_0.5_1_2.5_n\": [" << r.gratings_over_2pm[0] << ", " << r.gratings_over_2pm[1] << ", "
     << r.gratings_over_2pm[2] << ", " << r.gratings_over_2pm[3] << "]\n}\n";
   return o.str();

@@ -1,4 +1,5 @@
 #include "ruffini/twin/scene.h"
+#include "ruffini/twin/twin.h"
 
 #include <filesystem>
 
@@ -15,7 +16,7 @@ constexpr long kGratingMax = static_cast<long>(patch::kGratings);
 TwinEffects ReadEffects(YamlReader& e) {
   TwinEffects out;
   if (auto n = e.MapOr("noise")) {
-    out.noise = NoiseEffect{n->NumberOr("sigma_pm", 0.3, 0.0, 100.0)};
+    out.noise = NoiseEffect{n->NumberOr("sigma_pm", 0.3, 0.0, 10.0)};
     n->Finish();
   }
   if (auto g = e.MapOr("gain_spread")) {
@@ -62,7 +63,7 @@ TwinEffects ReadEffects(YamlReader& e) {
       fe.grating = static_cast<int>(f.Integer("grating", 1, kGratingMax));
       fe.kind = f.Choice("kind", {"dead", "dimmed"}) == "dead" ? FaultEffect::Kind::kDead : FaultEffect::Kind::kDimmed;
       fe.dropout = f.NumberOr("dropout", fe.kind == FaultEffect::Kind::kDimmed ? 0.2 : 0.0, 0.0, 1.0);
-      fe.noise_factor = f.NumberOr("noise_factor", fe.kind == FaultEffect::Kind::kDimmed ? 4.0 : 1.0, 1.0, 1000.0);
+      fe.noise_factor = f.NumberOr("noise_factor", fe.kind == FaultEffect::Kind::kDimmed ? 4.0 : 1.0, 1.0, 100.0);
       f.Finish();
       out.faults.push_back(fe);
     }
@@ -72,7 +73,7 @@ TwinEffects ReadEffects(YamlReader& e) {
     ss.seed = static_cast<std::uint64_t>(s->IntegerOr("seed", 0, 0, 1L << 40));
     ss.position_mm = s->NumberOr("position_mm", 1.0, 0.0, 10.0);
     ss.thickness_sigma = s->NumberOr("thickness_sigma", 0.03, 0.0, 0.2);
-    ss.wavelength_nm = s->NumberOr("wavelength_nm", 0.05, 0.0, 0.5);
+    ss.wavelength_nm = s->NumberOr("wavelength_nm", 0.05, 0.0, 0.05);
     s->Finish();
     out.skin_sample = ss;
   }
@@ -116,7 +117,7 @@ Scene LoadScene(const std::string& path) {
   if (auto t = root.MapOr("twin")) {
     if (auto pr = t->MapOr("probe")) {
       s.probe.shape = pr->Choice("shape", {"sphere", "point"}) == "sphere" ? Probe::Shape::kSphere : Probe::Shape::kPoint;
-      s.probe.radius_mm = pr->Number("radius_mm", 0.01, 50.0);
+      s.probe.radius_mm = pr->Number("radius_mm", 0.01, kMaxProbeRadiusMm);
       pr->Finish();
     }
     if (auto lc = t->MapOr("load_cell")) {

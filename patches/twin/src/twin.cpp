@@ -130,6 +130,15 @@ SkinTwin::SkinTwin(const patch::PatchSpec& spec, const TwinEffects& effects, std
       reference_nm_[i] += s.wavelength_nm * (2.0 * u_wl - 1.0);
     }
   }
+  for (std::size_t i = 1; i < patch::kGratings; ++i) {
+    const double gap = reference_nm_[i] - reference_nm_[i - 1];
+    if (gap < 2.0 * spec.fibre.band_half_width_nm) {
+      throw InputError("skin sample: FBG " + std::to_string(i) + " and " + std::to_string(i + 1) + " references are " +
+                       std::to_string(gap) + " nm apart, less than two band half-widths (" +
+                       std::to_string(2.0 * spec.fibre.band_half_width_nm) +
+                       " nm); lower skin_sample.wavelength_nm or widen the spacing");
+    }
+  }
   if (effects.skin_sample) {
     const double n = std::clamp(normal(fab), -3.0, 3.0);
     thickness_mm_ *= 1.0 + effects.skin_sample->thickness_sigma * n;
@@ -192,7 +201,8 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
   out.fill(0.0);
   const patch::Region extent = spec_.Extent();
   for (const Contact& c : contacts) {
-    if (!std::isfinite(c.force_n) || c.force_n < 0.0 || !std::isfinite(c.at.y_mm) || !std::isfinite(c.at.r_deg)) {
+    if (!std::isfinite(c.force_n) || c.force_n < 0.0 || !std::isfinite(c.at.y_mm) || !std::isfinite(c.at.r_deg) ||
+        !(c.probe.radius_mm > 0.0 && c.probe.radius_mm <= kMaxProbeRadiusMm)) {
       flags |= kBadContact;
       continue;
     }
@@ -275,17 +285,17 @@ void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, 
     // Draw every random number every frame, whatever the effects, so streams stay aligned across scenes.
     const double n = normal_(rng_);
     const double u = uniform_(rng_);
-    double shift = strain[i] + tc[i] * dt_c;
-    if (shift > band_pm || shift < -band_pm) {
-      shift = std::clamp(shift, -band_pm, band_pm);
-      flags |= kSaturated;
-    }
-    if (dead_[i] || u < dropout_[i]) {
+    double shift = strain[i] + tc[i] * dt_c + noise_pm_[i] * n;
+    if (dead_[i] || u < dropout_[i] || std::isnan(shift)) {
       wl[i] = std::numeric_limits<double>::quiet_NaN();
       flags |= kPeakMissing;
       continue;
     }
-    wl[i] = ref[i] + (shift + noise_pm_[i] * n) * 1e-3;
+    if (!(std::abs(shift) <= band_pm)) {  // the interrogator cannot follow a peak out of its band
+      shift = std::clamp(shift, -band_pm, band_pm);
+      flags |= kSaturated;
+    }
+    wl[i] = ref[i] + shift * 1e-3;
   }
 }
 

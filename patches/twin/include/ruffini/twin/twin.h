@@ -27,6 +27,9 @@ namespace ruffini::twin {
 
 using Shifts = std::array<double, patch::kGratings>;
 
+// Largest probe radius the kernel tables cover (they stop at a 6 mm contact radius).
+inline constexpr double kMaxProbeRadiusMm = 6.0;
+
 struct Contact {
   patch::SurfacePoint at;
   double force_n = 0.0;
@@ -103,7 +106,7 @@ class SkinTwin {
   double point_force_limit_n_ = 0.0;            // saturation force for point-like probes
 };
 
-// Per-stream interrogator state: turns strain shifts into the peak wavelengths an interrogator reports
+// Per-stream interrogator state (holds a reference: the SkinTwin must outlive it and not be moved): turns strain shifts into the peak wavelengths an interrogator reports
 // (reference + strain + temperature, clipped to the band, noise, faults). Real-time safe Read().
 class InterrogatorSim {
  public:
