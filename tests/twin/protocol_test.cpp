@@ -270,7 +270,7 @@ TEST(Scenes, DefaultSceneLoads) {
   ASSERT_TRUE(e.noise.has_value());
   EXPECT_EQ(e.noise->sigma_pm, 0.3);
   ASSERT_TRUE(e.gain_spread.has_value());
-  EXPECT_EQ(e.gain_spread->sigma, 0.07);
+  EXPECT_EQ(e.gain_spread->sigma, 0.10);
   ASSERT_TRUE(e.irregular.has_value());
   std::set<int> irregular;
   for (const auto& g : e.irregular->gratings) irregular.insert(g.grating);

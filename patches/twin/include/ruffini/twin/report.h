@@ -20,6 +20,7 @@ namespace ruffini::twin {
 struct HotSpot {
   double area_mm2 = 0.0;
   int areas = 0;                    // connected regions
+  int peaks = 0;                    // local maxima of the response inside the hot spot (sub-regions)
   double peak_pm_per_n = 0.0;       // at the hot-spot force
   patch::SurfacePoint peak_at;      // most sensitive point
 };
