@@ -20,21 +20,16 @@
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
 
+#include "fixtures.h"
+
 namespace ruffini::twin {
 namespace {
 
 namespace fs = std::filesystem;
 constexpr std::size_t kN = patch::kGratings;
 
-const Scene& DefaultScene() {
-  static const Scene scene = LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
-  return scene;
-}
-
-const SkinTwin& DefaultTwin() {
-  static const SkinTwin twin(DefaultScene().Patch().spec, DefaultScene().effects, {DefaultScene().probe.radius_mm});
-  return twin;
-}
+using fixtures::DefaultScene;
+using fixtures::DefaultTwin;
 
 std::vector<dataset::Frame> Collect(const std::function<ProtocolRun(const FrameSink&)>& run, ProtocolRun* out) {
   std::vector<dataset::Frame> frames;

@@ -14,20 +14,15 @@
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
 
+#include "fixtures.h"
+
 namespace ruffini::twin {
 namespace {
 
 constexpr std::size_t kN = patch::kGratings;
 
-const Scene& DefaultScene() {
-  static const Scene scene = LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
-  return scene;
-}
-
-const SkinTwin& DefaultTwin() {
-  static const SkinTwin twin(DefaultScene().Patch().spec, DefaultScene().effects, {DefaultScene().probe.radius_mm});
-  return twin;
-}
+using fixtures::DefaultScene;
+using fixtures::DefaultTwin;
 
 const std::array<HotSpot, kN>& HotSpots() {
   static const auto hs = MeasureHotSpots(DefaultTwin(), DefaultScene().probe, 2.5 / 6.0, 20.0, 0.25);

@@ -12,19 +12,13 @@
 #include "ruffini/twin/report.h"
 #include "ruffini/twin/scene.h"
 
+#include "fixtures.h"
+
 namespace ruffini::twin {
 namespace {
 
-const std::string kScene = std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/forearm.yaml";
-
-const Scene& DefaultScene() {
-  static const Scene s = LoadScene(kScene);
-  return s;
-}
-const SkinTwin& PlainTwin() {
-  static const SkinTwin t(DefaultScene().patches[0].spec, TwinEffects{}, {5.5});
-  return t;
-}
+using fixtures::DefaultScene;
+using fixtures::PlainTwin;
 
 TEST(TwinRobustness, NonFiniteOrOversizedProbeRadiusIsRejected) {
   const SkinTwin& t = PlainTwin();

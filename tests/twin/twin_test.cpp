@@ -16,33 +16,18 @@
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
 
+#include "fixtures.h"
+
 namespace ruffini::twin {
 namespace {
 
 constexpr std::size_t kN = patch::kGratings;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-const patch::PatchSpec& Spec() {
-  static const patch::PatchSpec spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
-  return spec;
-}
-
-// No effects at all: nominal layer, unit gains, one lobe per grating, no noise.
-const SkinTwin& PlainTwin() {
-  static const SkinTwin twin(Spec(), TwinEffects{}, {5.5});
-  return twin;
-}
-
-const Scene& DefaultScene() {
-  static const Scene scene = LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
-  return scene;
-}
-
-// The default scene's twin (every effect the scene names).
-const SkinTwin& DefaultTwin() {
-  static const SkinTwin twin(DefaultScene().Patch().spec, DefaultScene().effects, {DefaultScene().probe.radius_mm});
-  return twin;
-}
+using fixtures::DefaultScene;
+using fixtures::DefaultTwin;
+using fixtures::PlainTwin;
+using fixtures::Spec;
 
 // Twins built with only a skin sample of the given seed (each seed changes the layer: new tables, built once).
 const SkinTwin& SampleTwin(std::uint64_t seed) {
