@@ -1,0 +1,52 @@
+#pragma once
+// The paper's localisation grids and the multigrid Neuron Integration Process (NIP).
+//
+// SG: the indented area cut into 6 (Y) x 5 (R) cells of 20 mm x 18 deg = 30 classes. VSG, HSG, DSG: the same
+// grid shifted by half a cell in Y (7 x 5 = 35), in R (6 x 6 = 36) or both (7 x 6 = 42); their outer cells
+// stick out half a cell beyond the area. NIP: every cell is split into 2 x 2 fine cells (10 mm x 9 deg);
+// overlaid, the four grids share one fine grid (14 x 12 over the extended area). A fine cell's weight is the
+// sum of the probabilities of its parent cell in each grid; the contact is the weighted barycentre of the
+// fine-cell centres.
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "ruffini/patch/spec.h"
+
+namespace ruffini::decode {
+
+struct GridSpec {
+  std::string name;
+  double y0_mm = 0, r0_deg = 0;       // corner of cell 0
+  double cell_y_mm = 20, cell_r_deg = 18;
+  int ny = 0, nr = 0;                 // class k = cell (k / nr, k % nr)
+  [[nodiscard]] int classes() const { return ny * nr; }
+  // Class of a point, or -1 outside the grid.
+  [[nodiscard]] int ClassOf(double y_mm, double r_deg) const;
+  [[nodiscard]] patch::SurfacePoint Centre(int k) const;
+};
+
+// The four grids over a patch's indented area, in the paper's order SG, VSG, HSG, DSG.
+std::array<GridSpec, 4> PaperGrids(const patch::Region& indented_area);
+
+// Precomputed NIP: fine cells, their centres and their parent class in each grid (-1 = none).
+class Nip {
+ public:
+  explicit Nip(std::span<const GridSpec> grids);
+  // probabilities: each grid's softmax, concatenated in grid order. Writes the barycentre and returns the
+  // largest fine-cell weight divided by the number of grids (a confidence in 0..1). Real-time safe.
+  double Locate(std::span<const float> probabilities, double& y_mm, double& r_deg) const noexcept;
+  // Spread of the weights around the barycentre (weighted RMS distance, in mm on the surface; radius given).
+  double Spread(std::span<const float> probabilities, double y_mm, double r_deg, double surface_radius_mm) const noexcept;
+  [[nodiscard]] std::size_t fine_cells() const { return centre_y_.size(); }
+  [[nodiscard]] std::size_t inputs() const { return inputs_; }
+
+ private:
+  std::vector<double> centre_y_, centre_r_;
+  std::vector<std::int32_t> parent_;  // fine_cells x grids, index into the concatenated probabilities
+  std::size_t grids_ = 0, inputs_ = 0;
+};
+
+}  // namespace ruffini::decode

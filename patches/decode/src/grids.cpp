@@ -1,0 +1,90 @@
+#include "ruffini/decode/grids.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace ruffini::decode {
+
+int GridSpec::ClassOf(double y_mm, double r_deg) const {
+  const double fy = (y_mm - y0_mm) / cell_y_mm, fr = (r_deg - r0_deg) / cell_r_deg;
+  if (!(fy >= 0.0 && fr >= 0.0 && fy < ny && fr < nr)) return -1;
+  return static_cast<int>(fy) * nr + static_cast<int>(fr);
+}
+
+patch::SurfacePoint GridSpec::Centre(int k) const {
+  return {y0_mm + (k / nr + 0.5) * cell_y_mm, r0_deg + (k % nr + 0.5) * cell_r_deg};
+}
+
+std::array<GridSpec, 4> PaperGrids(const patch::Region& a) {
+  const double cy = (a.y_max_mm - a.y_min_mm) / 6.0, cr = (a.r_max_deg - a.r_min_deg) / 5.0;
+  return {GridSpec{"SG", a.y_min_mm, a.r_min_deg, cy, cr, 6, 5},
+          GridSpec{"VSG", a.y_min_mm - cy / 2, a.r_min_deg, cy, cr, 7, 5},
+          GridSpec{"HSG", a.y_min_mm, a.r_min_deg - cr / 2, cy, cr, 6, 6},
+          GridSpec{"DSG", a.y_min_mm - cy / 2, a.r_min_deg - cr / 2, cy, cr, 7, 6}};
+}
+
+Nip::Nip(std::span<const GridSpec> grids) : grids_(grids.size()) {
+  // The fine grid: half-cell steps over the union of the grids' extents.
+  double y0 = 1e300, r0 = 1e300, y1 = -1e300, r1 = -1e300, fy = 1e300, fr = 1e300;
+  for (const auto& g : grids) {
+    y0 = std::min(y0, g.y0_mm);
+    r0 = std::min(r0, g.r0_deg);
+    y1 = std::max(y1, g.y0_mm + g.ny * g.cell_y_mm);
+    r1 = std::max(r1, g.r0_deg + g.nr * g.cell_r_deg);
+    fy = std::min(fy, g.cell_y_mm / 2);
+    fr = std::min(fr, g.cell_r_deg / 2);
+    inputs_ += static_cast<std::size_t>(g.classes());
+  }
+  const int ny = static_cast<int>(std::lround((y1 - y0) / fy)), nr = static_cast<int>(std::lround((r1 - r0) / fr));
+  for (int i = 0; i < ny; ++i) {
+    for (int j = 0; j < nr; ++j) {
+      const double y = y0 + (i + 0.5) * fy, r = r0 + (j + 0.5) * fr;
+      centre_y_.push_back(y);
+      centre_r_.push_back(r);
+      std::size_t offset = 0;
+      for (const auto& g : grids) {
+        const int k = g.ClassOf(y, r);
+        parent_.push_back(k < 0 ? -1 : static_cast<std::int32_t>(offset + static_cast<std::size_t>(k)));
+        offset += static_cast<std::size_t>(g.classes());
+      }
+    }
+  }
+}
+
+double Nip::Locate(std::span<const float> p, double& y_mm, double& r_deg) const noexcept {
+  double sw = 0, sy = 0, sr = 0, best = 0;
+  for (std::size_t c = 0; c < centre_y_.size(); ++c) {
+    double w = 0;
+    for (std::size_t g = 0; g < grids_; ++g) {
+      const std::int32_t k = parent_[c * grids_ + g];
+      if (k >= 0) w += p[static_cast<std::size_t>(k)];
+    }
+    sw += w;
+    sy += w * centre_y_[c];
+    sr += w * centre_r_[c];
+    best = std::max(best, w);
+  }
+  if (!(sw > 0)) return 0.0;  // y, r untouched
+  y_mm = sy / sw;
+  r_deg = sr / sw;
+  return best / static_cast<double>(grids_);
+}
+
+double Nip::Spread(std::span<const float> p, double y_mm, double r_deg, double radius_mm) const noexcept {
+  const double mm_per_deg = radius_mm * std::numbers::pi / 180.0;
+  double sw = 0, s2 = 0;
+  for (std::size_t c = 0; c < centre_y_.size(); ++c) {
+    double w = 0;
+    for (std::size_t g = 0; g < grids_; ++g) {
+      const std::int32_t k = parent_[c * grids_ + g];
+      if (k >= 0) w += p[static_cast<std::size_t>(k)];
+    }
+    const double dy = centre_y_[c] - y_mm, da = (centre_r_[c] - r_deg) * mm_per_deg;
+    sw += w;
+    s2 += w * (dy * dy + da * da);
+  }
+  return sw > 0 ? std::sqrt(s2 / sw) : 0.0;
+}
+
+}  // namespace ruffini::decode

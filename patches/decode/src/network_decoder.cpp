@@ -1,0 +1,221 @@
+#include "ruffini/decode/network_decoder.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "ruffini/error.h"
+
+namespace ruffini::decode {
+
+template <typename Scalar>
+NetworkDecoder<Scalar>::NetworkDecoder(const v1::DecoderModel& m, DecoderOptions options)
+    : window_(static_cast<int>(m.force().window())), radius_mm_(m.surface_radius_mm()), max_missing_(options.max_missing) {
+  const auto& f = m.force();
+  for (int i = 0; i < 16; ++i) {
+    f_mean_[static_cast<std::size_t>(i)] = static_cast<Scalar>(f.input().mean(i));
+    f_inv_std_[static_cast<std::size_t>(i)] = static_cast<Scalar>(1.0 / f.input().std(i));
+  }
+  int channels = window_, length = 16;
+  for (const auto& c : f.conv()) {
+    const int out = static_cast<int>(c.weight().shape(0)), kernel = static_cast<int>(c.weight().shape(2));
+    const int pad = static_cast<int>(c.pad_left());
+    Layer l;
+    l.w = Matrix::Zero(out * length, channels * length);
+    l.b.resize(out * length);
+    for (int o = 0; o < out; ++o) {
+      for (int p = 0; p < length; ++p) {
+        l.b[o * length + p] = static_cast<Scalar>(c.bias().values(o));
+        for (int i = 0; i < channels; ++i) {
+          for (int k = 0; k < kernel; ++k) {
+            const int q = p + k - pad;  // cross-correlation, zero padding
+            if (q < 0 || q >= length) continue;
+            l.w(o * length + p, i * length + q) += static_cast<Scalar>(c.weight().values((o * channels + i) * kernel + k));
+          }
+        }
+      }
+    }
+    l.channels = out;
+    l.length = length;
+    l.pool = static_cast<int>(c.pool());
+    force_.push_back(std::move(l));
+    channels = out;
+    length /= static_cast<int>(c.pool());
+  }
+  auto dense = [](const v1::DenseLayer& d) {
+    Layer l;
+    const auto out = static_cast<Eigen::Index>(d.weight().shape(0)), in = static_cast<Eigen::Index>(d.weight().shape(1));
+    l.w.resize(out, in);
+    for (Eigen::Index r = 0; r < out; ++r) {
+      for (Eigen::Index c = 0; c < in; ++c) l.w(r, c) = static_cast<Scalar>(d.weight().values(static_cast<int>(r * in + c)));
+    }
+    l.b.resize(out);
+    for (Eigen::Index r = 0; r < out; ++r) l.b[r] = static_cast<Scalar>(d.bias().values(static_cast<int>(r)));
+    l.relu = d.relu();
+    return l;
+  };
+  for (const auto& d : f.dense()) force_.push_back(dense(d));
+  out_scale_ = static_cast<Scalar>(f.output_scale_n());
+  out_offset_ = static_cast<Scalar>(f.output_offset_n());
+
+  std::vector<int> chosen = options.grids;
+  if (chosen.empty()) {
+    for (int k = 0; k < m.location_size(); ++k) chosen.push_back(k);
+  }
+  std::vector<GridSpec> grids;
+  for (int k : chosen) {
+    if (k < 0 || k >= m.location_size()) throw InputError("decoder option names location net " + std::to_string(k) + ", the model has " + std::to_string(m.location_size()));
+    const auto& ln = m.location(k);
+    Mlp mlp;
+    for (int i = 0; i < 16; ++i) {
+      mlp.mean[static_cast<std::size_t>(i)] = static_cast<Scalar>(ln.input().mean(i));
+      mlp.inv_std[static_cast<std::size_t>(i)] = static_cast<Scalar>(1.0 / ln.input().std(i));
+    }
+    for (const auto& d : ln.dense()) mlp.layers.push_back(dense(d));
+    location_.push_back(std::move(mlp));
+    const auto& g = ln.grid();
+    grids.push_back(GridSpec{g.name(), g.y0_mm(), g.r0_deg(), g.cell_y_mm(), g.cell_r_deg(), static_cast<int>(g.ny()),
+                             static_cast<int>(g.nr())});
+  }
+  nip_ = std::make_unique<Nip>(grids);
+  gate_on_n_ = m.gating().on_n();
+  gate_off_n_ = m.gating().off_n();
+}
+
+template <typename Scalar>
+NetworkDecoder<Scalar>::Data::Data(const NetworkDecoder& d) {
+  window.setZero(d.window_, 16);
+  flat.setZero(d.window_ * 16);
+  for (const auto& l : d.force_) act.push_back(Vector::Zero(l.w.rows()));
+  std::size_t widest = 16;
+  for (const auto& m : d.location_) {
+    for (const auto& l : m.layers) widest = std::max(widest, static_cast<std::size_t>(l.w.rows()));
+  }
+  // Two ping-pong buffers of the widest location layer, plus the input.
+  loc.assign(3, Vector::Zero(static_cast<Eigen::Index>(widest)));
+  probabilities.assign(d.nip_->inputs(), 0.0f);
+}
+
+template <typename Scalar>
+void NetworkDecoder<Scalar>::RunForce(Data& d) const noexcept {
+  const Vector* x = &d.flat;
+  for (std::size_t k = 0; k < force_.size(); ++k) {
+    const Layer& l = force_[k];
+    Vector& y = d.act[k];
+    y.noalias() = l.w * (*x);
+    y += l.b;
+    if (l.relu) y = y.cwiseMax(Scalar(0));
+    if (l.pool > 1) {  // max-pool in place along each channel: y[c*L/p + j] = max over the pool
+      const int out_len = l.length / l.pool;
+      for (int c = 0; c < l.channels; ++c) {
+        for (int j = 0; j < out_len; ++j) {
+          Scalar v = y[c * l.length + j * l.pool];
+          for (int t = 1; t < l.pool; ++t) v = std::max(v, y[c * l.length + j * l.pool + t]);
+          y[c * out_len + j] = v;  // writes never overtake reads (c*out_len + j <= c*L + j*p)
+        }
+      }
+      // The next layer reads the first channels*out_len entries: expose them as a segment.
+      x = &y;
+      continue;
+    }
+    x = &y;
+  }
+}
+
+template <typename Scalar>
+float NetworkDecoder<Scalar>::ForceOnWindow(const float* w, Data& d) const noexcept {
+  for (int t = 0; t < window_; ++t) {
+    for (int i = 0; i < 16; ++i) {
+      const auto ui = static_cast<std::size_t>(i);
+      d.flat[t * 16 + i] = (static_cast<Scalar>(w[t * 16 + i]) - f_mean_[ui]) * f_inv_std_[ui];
+    }
+  }
+  RunForce(d);
+  return static_cast<float>(d.act.back()[0] * out_scale_ + out_offset_);
+}
+
+template <typename Scalar>
+void NetworkDecoder<Scalar>::RunLocation(const std::array<Scalar, 16>& raw, Data& d) const noexcept {
+  std::size_t offset = 0;
+  for (const Mlp& m : location_) {
+    Vector& in = d.loc[2];
+    for (std::size_t i = 0; i < 16; ++i) in[static_cast<Eigen::Index>(i)] = (raw[i] - m.mean[i]) * m.inv_std[i];
+    const Vector* x = &in;
+    Eigen::Index n = 16;
+    for (std::size_t k = 0; k < m.layers.size(); ++k) {
+      const Layer& l = m.layers[k];
+      Vector& y = d.loc[k % 2];
+      const Eigen::Index rows = l.w.rows();
+      y.head(rows).noalias() = l.w * x->head(n);
+      y.head(rows) += l.b;
+      if (l.relu) y.head(rows) = y.head(rows).cwiseMax(Scalar(0));
+      x = &y;
+      n = rows;
+    }
+    // Stable softmax: subtract the largest logit.
+    const Scalar top = x->head(n).maxCoeff();
+    Scalar sum = 0;
+    for (Eigen::Index k = 0; k < n; ++k) sum += std::exp((*x)[k] - top);
+    for (Eigen::Index k = 0; k < n; ++k) {
+      d.probabilities[offset + static_cast<std::size_t>(k)] = static_cast<float>(std::exp((*x)[k] - top) / sum);
+    }
+    offset += static_cast<std::size_t>(n);
+  }
+}
+
+template <typename Scalar>
+DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) const noexcept {
+  DecodeOutput out;
+  // Missing peaks (NaN/Inf) take the training mean: they carry no information, and z = 0 says so.
+  std::array<Scalar, 16> raw{};
+  int missing = 0;
+  for (std::size_t i = 0; i < 16; ++i) {
+    if (std::isfinite(shift[i])) {
+      raw[i] = static_cast<Scalar>(shift[i]);
+    } else {
+      raw[i] = f_mean_[i];
+      ++missing;
+    }
+  }
+  out.missing = static_cast<std::uint8_t>(missing);
+  for (std::size_t i = 0; i < 16; ++i) d.window(d.head, static_cast<Eigen::Index>(i)) = (raw[i] - f_mean_[i]) * f_inv_std_[i];
+  d.head = (d.head + 1) % window_;
+  d.filled = std::min(d.filled + 1, window_);
+  if (missing > max_missing_ || d.filled < window_) {
+    d.gate = false;
+    return out;  // invalid: force 0, not located
+  }
+  for (int t = 0; t < window_; ++t) {  // oldest first
+    const int row = (d.head + t) % window_;
+    d.flat.segment(t * 16, 16) = d.window.row(row).transpose();
+  }
+  RunForce(d);
+  const Scalar f = d.act.back()[0] * out_scale_ + out_offset_;
+  out.force_n = std::isfinite(static_cast<float>(f)) ? static_cast<float>(f) : 0.0f;
+  out.valid = std::isfinite(static_cast<float>(f));
+  if (!out.valid) return out;
+  d.gate = d.gate ? out.force_n > gate_off_n_ : out.force_n > gate_on_n_;
+  out.in_contact = d.gate;
+  if (!d.gate) return out;
+  RunLocation(raw, d);
+  double y = 0, r = 0;
+  out.confidence = static_cast<float>(nip_->Locate(d.probabilities, y, r));
+  out.location_sigma_mm = static_cast<float>(nip_->Spread(d.probabilities, y, r, radius_mm_));
+  out.y_mm = static_cast<float>(y);
+  out.r_deg = static_cast<float>(r);
+  out.located = true;
+  return out;
+}
+
+template <typename Scalar>
+void NetworkDecoder<Scalar>::Probabilities(const ShiftsPm& shift, Data& d, std::vector<float>& out) const {
+  std::array<Scalar, 16> raw{};
+  for (std::size_t i = 0; i < 16; ++i) raw[i] = std::isfinite(shift[i]) ? static_cast<Scalar>(shift[i]) : f_mean_[i];
+  RunLocation(raw, d);
+  out = d.probabilities;
+}
+
+template class NetworkDecoder<float>;
+template class NetworkDecoder<double>;
+
+}  // namespace ruffini::decode
