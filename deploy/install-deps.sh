@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs every Debian 12 package Ruffini needs to build, test and run. Idempotent and non-interactive;
 # run as root (or with sudo). Nothing is fetched from anywhere but Debian's archive.
-#   deploy/install-deps.sh             build + test + run
-#   deploy/install-deps.sh --training  also libtorch (only `ruffini train` needs it)
+# libtorch (Debian's libtorch-dev) is for training only: `ruffini train` and the libtorch comparison in
+# `ruffini bench`; the decoders never link it. The tests train small models, so it is installed by default;
+# `--no-training` skips it (the build then leaves `train` out).
 set -euo pipefail
 
 packages=(
@@ -13,7 +14,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev liburdfdom-dev
 )
-if [[ "${1:-}" == "--training" ]]; then
+if [[ "${1:-}" != "--no-training" ]]; then
   packages+=(libtorch-dev)
 fi
 

@@ -5,5 +5,6 @@
 namespace ruffini::cli {
 
 void RegisterTwinCommands(CLI::App& app);
+void RegisterDecodeCommands(CLI::App& app);
 
 }  // namespace ruffini::cli

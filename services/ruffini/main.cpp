@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "Show help for every subcommand");
   ruffini::cli::RegisterTwinCommands(app);
+  ruffini::cli::RegisterDecodeCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,59 @@
+#pragma once
+// Training the paper's decoders with libtorch (training only: the runtime is Eigen, ruffini::decode).
+//
+// Force: a CNN (3 x [conv 16 filters, kernel 16, stride 1, 'same' padding, ReLU, max-pool 2], flatten,
+// dense 100 ReLU, dense 1) over a window of the last W frames of 16 z-scored shifts, regressing the
+// z-scored load-cell force, MSE. Location: one MLP per grid (3 hidden ReLU layers, dropout after the second,
+// softmax over the grid's cells), cross-entropy, trained on frames whose force label exceeds the gate.
+// SGD with momentum 0.9 (Adam as a measured variant). Fixed seeds. Whole indentations are never split.
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "ruffini/eval/prepared.h"
+#include "ruffini/patch/spec.h"
+#include "ruffini/v1/model.pb.h"
+
+namespace ruffini::train {
+
+struct TrainOptions {
+  int window = 1;                          // W: frames the force net sees
+  std::vector<int> mlp_widths = {64, 64, 64};
+  double dropout = 0.2;
+  int epochs_force = 12;
+  int epochs_location = 12;
+  int frames_per_epoch = 100000;           // samples drawn (with replacement) per epoch
+  int batch = 256;
+  double lr_force = 0.01;
+  double lr_location = 0.05;
+  double momentum = 0.9;
+  std::string optimizer = "sgd";           // sgd | adam
+  int folds = 5;                           // 0: no cross-validation
+  double test_fraction = 0.15;
+  double gate_n = 0.05;
+  std::uint64_t seed = 1;
+  int threads = 2;
+  int golden_vectors = 4;
+};
+
+// (phase, done, total, last epoch loss): phases "fold k/5" and "final".
+using TrainProgress = std::function<void(const std::string& phase, int epoch, int epochs, double loss)>;
+
+// Trains on `data` for `spec` (grids from its indented area). Fills every field of the model, including the
+// cross-validation table, the held-out test indentations and golden vectors computed by libtorch.
+v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec, const TrainOptions& options,
+                       const std::string& dataset_path, const TrainProgress& progress = {});
+
+// libtorch eager inference of a model's force net on one window (for the speed comparison in `bench`).
+class TorchForceNet {
+ public:
+  explicit TorchForceNet(const v1::DecoderModel& model);
+  ~TorchForceNet();
+  float Forward(const float* window_shift_pm);  // W x 16, oldest first
+ private:
+  struct Impl;
+  Impl* impl_;
+};
+
+}  // namespace ruffini::train

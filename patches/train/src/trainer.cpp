@@ -1,0 +1,493 @@
+#include "ruffini/train/trainer.h"
+
+#include <torch/torch.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <random>
+
+#include "ruffini/decode/grids.h"
+#include "ruffini/error.h"
+#include "ruffini/patch/geometry.h"
+#include "ruffini/stats.h"
+
+namespace ruffini::train {
+namespace {
+
+constexpr int kG = 16;
+
+struct ForceNetImpl : torch::nn::Module {
+  explicit ForceNetImpl(int window) {
+    for (int k = 0; k < 3; ++k) {
+      convs.push_back(register_module("conv" + std::to_string(k),
+                                      torch::nn::Conv1d(torch::nn::Conv1dOptions(k == 0 ? window : 16, 16, 16).padding(torch::kSame))));
+    }
+    fc1 = register_module("fc1", torch::nn::Linear(32, 100));
+    fc2 = register_module("fc2", torch::nn::Linear(100, 1));
+  }
+  torch::Tensor forward(torch::Tensor x) {  // [N, W, 16]
+    for (auto& c : convs) x = torch::max_pool1d(torch::relu(c->forward(x)), 2);
+    return fc2->forward(torch::relu(fc1->forward(x.flatten(1))));
+  }
+  std::vector<torch::nn::Conv1d> convs;
+  torch::nn::Linear fc1{nullptr}, fc2{nullptr};
+};
+TORCH_MODULE(ForceNet);
+
+struct MlpImpl : torch::nn::Module {
+  MlpImpl(const std::vector<int>& w, int classes, double dropout) {
+    l1 = register_module("l1", torch::nn::Linear(kG, w[0]));
+    l2 = register_module("l2", torch::nn::Linear(w[0], w[1]));
+    drop = register_module("drop", torch::nn::Dropout(dropout));
+    l3 = register_module("l3", torch::nn::Linear(w[1], w[2]));
+    out = register_module("out", torch::nn::Linear(w[2], classes));
+  }
+  torch::Tensor forward(torch::Tensor x) {
+    x = torch::relu(l1->forward(x));
+    x = drop->forward(torch::relu(l2->forward(x)));
+    return out->forward(torch::relu(l3->forward(x)));
+  }
+  torch::nn::Linear l1{nullptr}, l2{nullptr}, l3{nullptr}, out{nullptr};
+  torch::nn::Dropout drop{nullptr};
+};
+TORCH_MODULE(Mlp);
+
+struct Norm {
+  std::array<float, kG> mean{}, std{};
+};
+
+// Frames' z-scored shifts, with missing values at z = 0 (the runtime does the same).
+struct Features {
+  const eval::Prepared& p;
+  Norm norm;
+  float z(std::size_t frame, int i) const {
+    const float v = p.shift_pm[frame][static_cast<std::size_t>(i)];
+    return std::isfinite(v) ? (v - norm.mean[static_cast<std::size_t>(i)]) / norm.std[static_cast<std::size_t>(i)] : 0.0f;
+  }
+};
+
+Norm ComputeNorm(const eval::Prepared& p, const std::vector<std::uint32_t>& frames) {
+  Norm n;
+  for (int i = 0; i < kG; ++i) {
+    double s = 0, s2 = 0;
+    std::size_t c = 0;
+    for (auto f : frames) {
+      const float v = p.shift_pm[f][static_cast<std::size_t>(i)];
+      if (!std::isfinite(v)) continue;
+      s += v;
+      s2 += static_cast<double>(v) * v;
+      ++c;
+    }
+    const double mean = c ? s / static_cast<double>(c) : 0.0;
+    const double var = c ? std::max(0.0, s2 / static_cast<double>(c) - mean * mean) : 1.0;
+    n.mean[static_cast<std::size_t>(i)] = static_cast<float>(mean);
+    // A channel that never moves (a dead grating, or one far from every contact) must not divide by ~0.
+    n.std[static_cast<std::size_t>(i)] = static_cast<float>(std::max(std::sqrt(var), 1e-3));
+  }
+  return n;
+}
+
+struct Pools {
+  std::vector<std::uint32_t> frames;   // force-net samples
+  std::vector<std::uint32_t> gated;    // location samples (force label above the gate)
+};
+
+Pools MakePools(const eval::Prepared& p, const std::vector<std::size_t>& indentations, double gate_n) {
+  Pools pools;
+  for (std::size_t i : indentations) {
+    for (std::size_t f = p.ranges[i].first; f < p.ranges[i].second; ++f) {
+      const auto& s = p.shift_pm[f];
+      if (!std::isfinite(p.force_n[f]) || std::all_of(s.begin(), s.end(), [](float v) { return !std::isfinite(v); })) continue;
+      pools.frames.push_back(static_cast<std::uint32_t>(f));
+      if (p.force_n[f] > gate_n && std::isfinite(p.y_mm[f]) && std::isfinite(p.r_deg[f])) {
+        pools.gated.push_back(static_cast<std::uint32_t>(f));
+      }
+    }
+  }
+  return pools;
+}
+
+// Deterministic subsample of at most n entries.
+std::vector<std::uint32_t> Subsample(const std::vector<std::uint32_t>& v, std::size_t n) {
+  if (v.size() <= n) return v;
+  std::vector<std::uint32_t> out;
+  const double step = static_cast<double>(v.size()) / static_cast<double>(n);
+  for (std::size_t k = 0; k < n; ++k) out.push_back(v[static_cast<std::size_t>(static_cast<double>(k) * step)]);
+  return out;
+}
+
+class Trainer {
+ public:
+  Trainer(const eval::Prepared& p, const patch::PatchSpec& spec, const TrainOptions& o, const TrainProgress& progress)
+      : p_(p), spec_(spec), o_(o), progress_(progress), grids_(decode::PaperGrids(spec.indented_area)) {
+    start_of_.resize(p.size(), 0);
+    for (const auto& r : p.ranges) {
+      for (std::size_t f = r.first; f < r.second; ++f) start_of_[f] = static_cast<std::uint32_t>(r.first);
+    }
+  }
+
+  struct Nets {
+    ForceNet force{nullptr};
+    std::vector<Mlp> mlps;
+    Norm force_norm, loc_norm;
+    float f_mean = 0, f_std = 1;
+  };
+
+  Nets Fit(const Pools& pools, const std::string& phase) {
+    Nets n;
+    n.force_norm = ComputeNorm(p_, pools.frames);
+    n.loc_norm = ComputeNorm(p_, pools.gated);
+    double s = 0, s2 = 0;
+    for (auto f : pools.frames) {
+      s += p_.force_n[f];
+      s2 += static_cast<double>(p_.force_n[f]) * p_.force_n[f];
+    }
+    const double cnt = static_cast<double>(std::max<std::size_t>(1, pools.frames.size()));
+    n.f_mean = static_cast<float>(s / cnt);
+    n.f_std = static_cast<float>(std::max(1e-3, std::sqrt(std::max(0.0, s2 / cnt - (s / cnt) * (s / cnt)))));
+
+    torch::manual_seed(o_.seed);
+    n.force = ForceNet(o_.window);
+    std::mt19937_64 rng(o_.seed * 7919 + 1);
+    TrainLoop(*n.force, pools.frames, o_.epochs_force, o_.lr_force, phase + " force", rng, [&](const auto& batch) {
+      return torch::mse_loss(n.force->forward(ForceInput(batch, n.force_norm)), ForceTarget(batch, n));
+    });
+    for (std::size_t g = 0; g < grids_.size(); ++g) {
+      torch::manual_seed(o_.seed + 101 * (g + 1));
+      Mlp mlp(o_.mlp_widths, grids_[g].classes(), o_.dropout);
+      TrainLoop(*mlp, pools.gated, o_.epochs_location, o_.lr_location, phase + " " + grids_[g].name, rng,
+                [&](const auto& batch) {
+                  return torch::cross_entropy_loss(mlp->forward(LocInput(batch, n.loc_norm)), LocTarget(batch, grids_[g]));
+                });
+      n.mlps.push_back(mlp);
+    }
+    return n;
+  }
+
+  // Median/IQR absolute errors: force in mN over `frames`; location in mm (per grid and union) over `gated`.
+  std::vector<stats::Summary> Errors(Nets& n, const Pools& pools) {
+    torch::NoGradGuard no_grad;
+    n.force->eval();
+    std::vector<stats::Summary> out;
+    const auto frames = Subsample(pools.frames, 60000);
+    std::vector<double> err;
+    for (std::size_t k = 0; k < frames.size(); k += 4096) {
+      const std::vector<std::uint32_t> batch(frames.begin() + static_cast<std::ptrdiff_t>(k),
+                                             frames.begin() + static_cast<std::ptrdiff_t>(std::min(frames.size(), k + 4096)));
+      const auto y = n.force->forward(ForceInput(batch, n.force_norm)).squeeze(1) * n.f_std + n.f_mean;
+      const auto acc = y.accessor<float, 1>();
+      for (std::size_t j = 0; j < batch.size(); ++j) err.push_back(std::abs(acc[static_cast<long>(j)] - p_.force_n[batch[j]]) * 1e3);
+    }
+    out.push_back(stats::Summarize(err));
+    n.force->train();
+    const auto gated = Subsample(pools.gated, 30000);
+    const auto probs = LocProbabilities(n, gated);
+    const patch::Geometry geo(spec_.surface_radius_mm);
+    std::size_t offset = 0;
+    std::vector<std::vector<double>> per(grids_.size() + 1);
+    std::vector<decode::Nip> single;
+    for (const auto& g : grids_) single.emplace_back(std::span<const decode::GridSpec>(&g, 1));
+    const decode::Nip all(grids_);
+    for (std::size_t g = 0; g <= grids_.size(); ++g) {
+      for (std::size_t j = 0; j < gated.size(); ++j) {
+        const float* pj = probs.data() + j * all.inputs();
+        double y = 0, r = 0;
+        if (g < grids_.size()) {
+          single[g].Locate(std::span<const float>(pj + offset, static_cast<std::size_t>(grids_[g].classes())), y, r);
+        } else {
+          all.Locate(std::span<const float>(pj, all.inputs()), y, r);
+        }
+        per[g].push_back(geo.SurfaceDistanceMm({y, r}, {p_.y_mm[gated[j]], p_.r_deg[gated[j]]}));
+      }
+      if (g < grids_.size()) offset += static_cast<std::size_t>(grids_[g].classes());
+    }
+    for (auto& v : per) out.push_back(stats::Summarize(v));
+    return out;
+  }
+
+  std::vector<float> LocProbabilities(Nets& n, const std::vector<std::uint32_t>& frames) {
+    torch::NoGradGuard no_grad;
+    std::size_t width = 0;
+    for (const auto& g : grids_) width += static_cast<std::size_t>(g.classes());
+    std::vector<float> out(frames.size() * width);
+    const auto x = LocInput(frames, n.loc_norm);
+    std::size_t offset = 0;
+    for (std::size_t g = 0; g < grids_.size(); ++g) {
+      n.mlps[g]->eval();
+      const auto pr = torch::softmax(n.mlps[g]->forward(x), 1).contiguous();
+      const float* d = pr.data_ptr<float>();
+      const auto c = static_cast<std::size_t>(grids_[g].classes());
+      for (std::size_t j = 0; j < frames.size(); ++j) std::copy(d + j * c, d + (j + 1) * c, out.begin() + static_cast<std::ptrdiff_t>(j * width + offset));
+      n.mlps[g]->train();
+      offset += c;
+    }
+    return out;
+  }
+
+  void Export(Nets& n, const Pools& test_pools, v1::DecoderModel& m) {
+    auto put = [](v1::Tensor* t, const torch::Tensor& x) {
+      const auto c = x.detach().contiguous().to(torch::kFloat);
+      for (auto d : c.sizes()) t->add_shape(static_cast<std::uint32_t>(d));
+      t->mutable_values()->Add(c.data_ptr<float>(), c.data_ptr<float>() + c.numel());
+    };
+    auto norm = [](v1::Normalization* out, const Norm& nm) {
+      for (int i = 0; i < kG; ++i) {
+        out->add_mean(nm.mean[static_cast<std::size_t>(i)]);
+        out->add_std(nm.std[static_cast<std::size_t>(i)]);
+      }
+    };
+    auto* fn = m.mutable_force();
+    fn->set_window(static_cast<std::uint32_t>(o_.window));
+    norm(fn->mutable_input(), n.force_norm);
+    for (auto& c : n.force->convs) {
+      auto* l = fn->add_conv();
+      put(l->mutable_weight(), c->weight);
+      put(l->mutable_bias(), c->bias);
+      l->set_pad_left(7);  // PyTorch 'same' for kernel 16: 15 zeros, 7 before and 8 after
+      l->set_pool(2);
+    }
+    for (auto* lin : {&n.force->fc1, &n.force->fc2}) {
+      auto* d = fn->add_dense();
+      put(d->mutable_weight(), (*lin)->weight);
+      put(d->mutable_bias(), (*lin)->bias);
+      d->set_relu(lin == &n.force->fc1);
+    }
+    fn->set_output_scale_n(n.f_std);
+    fn->set_output_offset_n(n.f_mean);
+    for (std::size_t g = 0; g < grids_.size(); ++g) {
+      auto* ln = m.add_location();
+      auto* gr = ln->mutable_grid();
+      gr->set_name(grids_[g].name);
+      gr->set_y0_mm(grids_[g].y0_mm);
+      gr->set_r0_deg(grids_[g].r0_deg);
+      gr->set_cell_y_mm(grids_[g].cell_y_mm);
+      gr->set_cell_r_deg(grids_[g].cell_r_deg);
+      gr->set_ny(static_cast<std::uint32_t>(grids_[g].ny));
+      gr->set_nr(static_cast<std::uint32_t>(grids_[g].nr));
+      norm(ln->mutable_input(), n.loc_norm);
+      const auto& mlp = n.mlps[g];
+      int k = 0;
+      for (auto* lin : {&mlp->l1, &mlp->l2, &mlp->l3, &mlp->out}) {
+        auto* d = ln->add_dense();
+        put(d->mutable_weight(), (*lin)->weight);
+        put(d->mutable_bias(), (*lin)->bias);
+        d->set_relu(k++ < 3);
+      }
+    }
+    m.mutable_gating()->set_on_n(static_cast<float>(o_.gate_n));
+    m.mutable_gating()->set_off_n(static_cast<float>(0.8 * o_.gate_n));
+    // Golden vectors: libtorch's outputs for a few held-out frames in contact.
+    std::vector<std::uint32_t> picks;
+    for (auto f : test_pools.gated) {
+      if (p_.force_n[f] > 0.3f) picks.push_back(f);
+    }
+    picks = Subsample(picks, static_cast<std::size_t>(o_.golden_vectors));
+    torch::NoGradGuard no_grad;
+    n.force->eval();
+    const auto probs = LocProbabilities(n, picks);
+    const decode::Nip all(grids_);
+    for (std::size_t j = 0; j < picks.size(); ++j) {
+      auto* gv = m.add_golden();
+      const std::uint32_t f = picks[j];
+      for (int t = 0; t < o_.window; ++t) {
+        const auto back = static_cast<std::size_t>(o_.window - 1 - t);
+        const std::size_t src = f >= start_of_[f] + back ? f - back : start_of_[f];  // as ForceInput does
+        for (int i = 0; i < kG; ++i) {
+          const float v = p_.shift_pm[src][static_cast<std::size_t>(i)];
+          gv->add_window_shift_pm(std::isfinite(v) ? v : n.force_norm.mean[static_cast<std::size_t>(i)]);
+        }
+      }
+      const auto y = n.force->forward(ForceInput({f}, n.force_norm)).item<float>() * n.f_std + n.f_mean;
+      gv->set_force_n(y);
+      const float* pj = probs.data() + j * all.inputs();
+      gv->mutable_probabilities()->Add(pj, pj + all.inputs());
+      double yy = 0, rr = 0;
+      all.Locate(std::span<const float>(pj, all.inputs()), yy, rr);
+      gv->set_y_mm(yy);
+      gv->set_r_deg(rr);
+    }
+    n.force->train();
+  }
+
+  const std::array<decode::GridSpec, 4>& grids() const { return grids_; }
+
+ private:
+  template <typename LossFn>
+  void TrainLoop(torch::nn::Module& net, const std::vector<std::uint32_t>& pool, int epochs, double lr,
+                 const std::string& phase, std::mt19937_64& rng, LossFn&& loss_fn) {
+    if (pool.empty()) throw InputError("training: no samples for " + phase + " (is the dataset labelled?)");
+    std::unique_ptr<torch::optim::Optimizer> opt;
+    if (o_.optimizer == "adam") {
+      opt = std::make_unique<torch::optim::Adam>(net.parameters(), torch::optim::AdamOptions(lr * 0.1));
+    } else {
+      opt = std::make_unique<torch::optim::SGD>(net.parameters(), torch::optim::SGDOptions(lr).momentum(o_.momentum));
+    }
+    net.train();
+    std::uniform_int_distribution<std::size_t> pick(0, pool.size() - 1);
+    const int steps = std::max(1, o_.frames_per_epoch / o_.batch);
+    std::vector<std::uint32_t> batch(static_cast<std::size_t>(o_.batch));
+    for (int e = 0; e < epochs; ++e) {
+      double total = 0;
+      for (int s = 0; s < steps; ++s) {
+        for (auto& b : batch) b = pool[pick(rng)];
+        opt->zero_grad();
+        torch::Tensor loss = loss_fn(batch);
+        loss.backward();
+        opt->step();
+        total += loss.item<double>();
+      }
+      if (progress_) progress_(phase, e + 1, epochs, total / steps);
+    }
+  }
+
+  torch::Tensor ForceInput(const std::vector<std::uint32_t>& frames, const Norm& norm) const {
+    const Features feat{p_, norm};
+    auto x = torch::empty({static_cast<long>(frames.size()), o_.window, kG});
+    float* d = x.data_ptr<float>();
+    for (std::size_t s = 0; s < frames.size(); ++s) {
+      const std::size_t f = frames[s], a = start_of_[f];
+      for (int t = 0; t < o_.window; ++t) {
+        const long back = o_.window - 1 - t;
+        const std::size_t src = f >= a + static_cast<std::size_t>(back) ? f - static_cast<std::size_t>(back) : a;
+        for (int i = 0; i < kG; ++i) *d++ = feat.z(src, i);
+      }
+    }
+    return x;
+  }
+  torch::Tensor ForceTarget(const std::vector<std::uint32_t>& frames, const Nets& n) const {
+    auto y = torch::empty({static_cast<long>(frames.size()), 1});
+    float* d = y.data_ptr<float>();
+    for (auto f : frames) *d++ = (p_.force_n[f] - n.f_mean) / n.f_std;
+    return y;
+  }
+  torch::Tensor LocInput(const std::vector<std::uint32_t>& frames, const Norm& norm) const {
+    const Features feat{p_, norm};
+    auto x = torch::empty({static_cast<long>(frames.size()), kG});
+    float* d = x.data_ptr<float>();
+    for (auto f : frames) {
+      for (int i = 0; i < kG; ++i) *d++ = feat.z(f, i);
+    }
+    return x;
+  }
+  torch::Tensor LocTarget(const std::vector<std::uint32_t>& frames, const decode::GridSpec& g) const {
+    auto y = torch::empty({static_cast<long>(frames.size())}, torch::kLong);
+    auto* d = y.data_ptr<long>();
+    for (auto f : frames) *d++ = std::max(0, g.ClassOf(p_.y_mm[f], p_.r_deg[f]));
+    return y;
+  }
+
+  const eval::Prepared& p_;
+  const patch::PatchSpec& spec_;
+  TrainOptions o_;
+  TrainProgress progress_;
+  std::array<decode::GridSpec, 4> grids_;
+  std::vector<std::uint32_t> start_of_;
+};
+
+}  // namespace
+
+v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec, const TrainOptions& o,
+                       const std::string& dataset_path, const TrainProgress& progress) {
+  if (o.window < 1 || o.window > 256) throw InputError("train: window must be 1..256");
+  if (o.mlp_widths.size() != 3) throw InputError("train: the location MLPs have exactly 3 hidden layers");
+  if (data.ids.size() < 10) throw InputError("train: the dataset has " + std::to_string(data.ids.size()) + " indentations; need at least 10");
+  const auto t0 = std::chrono::steady_clock::now();
+  torch::set_num_threads(o.threads);
+  const eval::Split split = eval::MakeSplit(data, o.test_fraction, o.folds, o.seed);
+  Trainer trainer(data, spec, o, progress);
+  v1::DecoderModel m;
+  m.set_format_version(1);
+  m.set_patch_name(spec.name);
+  m.set_patch_fingerprint(spec.Fingerprint());
+  m.set_surface_radius_mm(spec.surface_radius_mm);
+  auto* info = m.mutable_training();
+  const char* names[6] = {"force", "SG", "VSG", "HSG", "DSG", "union"};
+  for (int f = 0; f < o.folds; ++f) {
+    std::vector<std::size_t> tr, va;
+    for (std::size_t k = 0; k < split.train.size(); ++k) (split.fold[k] == f ? va : tr).push_back(split.train[k]);
+    const Pools ptr = MakePools(data, tr, o.gate_n), pva = MakePools(data, va, o.gate_n);
+    auto nets = trainer.Fit(ptr, "fold " + std::to_string(f + 1) + "/" + std::to_string(o.folds));
+    const auto etr = trainer.Errors(nets, ptr), eva = trainer.Errors(nets, pva);
+    for (std::size_t k = 0; k < 6; ++k) {
+      auto* row = info->add_folds();
+      row->set_fold(static_cast<std::uint32_t>(f + 1));
+      row->set_net(names[k]);
+      row->set_train_median(etr[k].median);
+      row->set_train_iqr(etr[k].iqr());
+      row->set_validation_median(eva[k].median);
+      row->set_validation_iqr(eva[k].iqr());
+    }
+  }
+  const Pools all_train = MakePools(data, split.train, o.gate_n), test = MakePools(data, split.test, o.gate_n);
+  auto nets = trainer.Fit(all_train, "final");
+  trainer.Export(nets, test, m);
+  for (std::size_t i : split.test) m.add_test_indentations(static_cast<std::uint32_t>(data.ids[i]));
+  info->set_dataset(dataset_path);
+  info->set_dataset_source(data.source);
+  info->set_seed(o.seed);
+  info->set_optimizer(o.optimizer == "adam" ? "adam" : "sgd momentum " + std::to_string(o.momentum).substr(0, 4));
+  info->set_epochs(static_cast<std::uint32_t>(o.epochs_force));
+  info->set_train_frames(all_train.frames.size());
+  info->set_test_frames(test.frames.size());
+  for (int w : o.mlp_widths) info->add_mlp_widths(static_cast<std::uint32_t>(w));
+  info->set_dropout(static_cast<float>(o.dropout));
+  info->set_frames_per_epoch(static_cast<std::uint32_t>(o.frames_per_epoch));
+  info->set_batch(static_cast<std::uint32_t>(o.batch));
+  info->set_learning_rate_force(static_cast<float>(o.lr_force));
+  info->set_learning_rate_location(static_cast<float>(o.lr_location));
+  info->set_tool_version("ruffini 0.1.0, libtorch " TORCH_VERSION);
+  info->set_seconds(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  return m;
+}
+
+struct TorchForceNet::Impl {
+  ForceNet net{nullptr};
+  int window = 1;
+  std::array<float, kG> mean{}, inv_std{};
+  float scale = 1, offset = 0;
+  torch::Tensor x;
+};
+
+TorchForceNet::TorchForceNet(const v1::DecoderModel& m) : impl_(new Impl) {
+  const auto& f = m.force();
+  impl_->window = static_cast<int>(f.window());
+  impl_->net = ForceNet(impl_->window);
+  torch::NoGradGuard no_grad;
+  auto load = [](torch::Tensor& t, const v1::Tensor& src) {
+    t.copy_(torch::from_blob(const_cast<float*>(src.values().data()), t.sizes(), torch::kFloat));
+  };
+  for (int k = 0; k < 3; ++k) {
+    load(impl_->net->convs[static_cast<std::size_t>(k)]->weight, f.conv(k).weight());
+    load(impl_->net->convs[static_cast<std::size_t>(k)]->bias, f.conv(k).bias());
+  }
+  load(impl_->net->fc1->weight, f.dense(0).weight());
+  load(impl_->net->fc1->bias, f.dense(0).bias());
+  load(impl_->net->fc2->weight, f.dense(1).weight());
+  load(impl_->net->fc2->bias, f.dense(1).bias());
+  impl_->net->eval();
+  for (int i = 0; i < kG; ++i) {
+    impl_->mean[static_cast<std::size_t>(i)] = f.input().mean(i);
+    impl_->inv_std[static_cast<std::size_t>(i)] = 1.0f / f.input().std(i);
+  }
+  impl_->scale = f.output_scale_n();
+  impl_->offset = f.output_offset_n();
+  impl_->x = torch::empty({1, impl_->window, kG});
+}
+
+TorchForceNet::~TorchForceNet() { delete impl_; }
+
+float TorchForceNet::Forward(const float* w) {
+  torch::NoGradGuard no_grad;
+  float* d = impl_->x.data_ptr<float>();
+  for (int t = 0; t < impl_->window; ++t) {
+    for (int i = 0; i < kG; ++i) {
+      const auto ui = static_cast<std::size_t>(i);
+      d[t * kG + i] = (w[t * kG + i] - impl_->mean[ui]) * impl_->inv_std[ui];
+    }
+  }
+  return impl_->net->forward(impl_->x).item<float>() * impl_->scale + impl_->offset;
+}
+
+}  // namespace ruffini::train

@@ -1,0 +1,89 @@
+// Decoder subcommands: train (libtorch builds only), evaluate, bench.
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <memory>
+#include <sstream>
+
+#include "commands.h"
+#include "progress.h"
+#include "ruffini/dataset/dataset.h"
+#include "ruffini/decode/model_io.h"
+#include "ruffini/error.h"
+#include "ruffini/eval/prepared.h"
+#include "ruffini/patch/spec_loader.h"
+#ifdef RUFFINI_HAVE_TORCH
+#include "ruffini/train/trainer.h"
+#endif
+
+namespace ruffini::cli {
+namespace {
+
+#ifdef RUFFINI_HAVE_TORCH
+void RegisterTrain(CLI::App& app) {
+  struct Args {
+    std::string data, out, patch_spec = RUFFINI_DEFAULT_PATCH;
+    train::TrainOptions o;
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("train", "Train the paper's decoders (CNN force + 4 grid MLPs) on a dataset");
+  cmd->add_option("--data", a->data, "Dataset (.h5)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--out", a->out, "Model file to write (.rmodel)")->required();
+  cmd->add_option("--patch-spec", a->patch_spec, "Patch spec the data comes from")->capture_default_str();
+  cmd->add_option("--window", a->o.window, "W: frames the force CNN sees")->check(CLI::Range(1, 256))->capture_default_str();
+  cmd->add_option("--mlp-widths", a->o.mlp_widths, "Hidden widths of the location MLPs (3)")->expected(3)->capture_default_str();
+  cmd->add_option("--dropout", a->o.dropout, "Dropout of the location MLPs")->check(CLI::Range(0.0, 0.9))->capture_default_str();
+  cmd->add_option("--epochs", a->o.epochs_force, "Epochs of every net")->check(CLI::Range(1, 10000))->capture_default_str();
+  cmd->add_option("--frames-per-epoch", a->o.frames_per_epoch, "Samples drawn per epoch")->check(CLI::Range(256, 100000000))->capture_default_str();
+  cmd->add_option("--batch", a->o.batch, "Minibatch size")->check(CLI::Range(1, 100000))->capture_default_str();
+  cmd->add_option("--lr-force", a->o.lr_force, "Learning rate of the force net")->capture_default_str();
+  cmd->add_option("--lr-location", a->o.lr_location, "Learning rate of the location nets")->capture_default_str();
+  cmd->add_option("--optimizer", a->o.optimizer, "sgd (momentum 0.9, the paper's) | adam")
+      ->check(CLI::IsMember({"sgd", "adam"}))->capture_default_str();
+  cmd->add_option("--folds", a->o.folds, "Cross-validation folds inside the training part (0 = none)")->check(CLI::Range(0, 20))->capture_default_str();
+  cmd->add_option("--seed", a->o.seed, "Seed (split, initialisation, sampling)")->capture_default_str();
+  cmd->add_option("--threads", a->o.threads, "Threads")->check(CLI::Range(1, 64))->capture_default_str();
+  cmd->callback([a]() {
+    a->o.epochs_location = a->o.epochs_force;
+    const patch::PatchSpec spec = patch::LoadPatchSpec(a->patch_spec);
+    const dataset::Dataset d = dataset::ReadDataset(a->data);
+    if (d.info.patch_name != spec.name) {
+      throw InputError(a->data + ": dataset is from patch '" + d.info.patch_name + "', the spec is '" + spec.name + "'");
+    }
+    spdlog::info("preparing {} frames (baseline tracking)", d.size());
+    const eval::Prepared p = eval::PrepareFrames(d);
+    std::unique_ptr<ProgressBar> bar;
+    std::string phase_shown;
+    const auto m = train::Train(p, spec, a->o, a->data, [&](const std::string& phase, int e, int epochs, double loss) {
+      if (phase != phase_shown) {
+        if (bar) bar->Finish();
+        bar = std::make_unique<ProgressBar>(phase + " epochs", static_cast<std::uint64_t>(epochs));
+        phase_shown = phase;
+      }
+      bar->Update(static_cast<std::uint64_t>(e));
+      spdlog::debug("{} epoch {}/{} loss {:.5f}", phase, e, epochs, loss);
+      if (e == epochs) spdlog::info("{}: final epoch loss {:.5f}", phase, loss);
+    });
+    if (bar) bar->Finish();
+    decode::ValidateModel(m, a->out);
+    decode::SaveModel(a->out, m);
+    std::printf("wrote %s (%llu train / %llu test frames, %.0f s)\n", a->out.c_str(),
+                static_cast<unsigned long long>(m.training().train_frames()),
+                static_cast<unsigned long long>(m.training().test_frames()), m.training().seconds());
+  });
+}
+#else
+void RegisterTrain(CLI::App& app) {
+  CLI::App* cmd = app.add_subcommand("train", "Train the decoders (this build has no libtorch)");
+  cmd->allow_extras();
+  cmd->callback([]() {
+    throw InputError("this ruffini was built without libtorch: run deploy/install-deps.sh and rebuild to train");
+  });
+}
+#endif
+
+}  // namespace
+
+void RegisterDecodeCommands(CLI::App& app) { RegisterTrain(app); }
+
+}  // namespace ruffini::cli

@@ -1,0 +1,129 @@
+// Training (libtorch) and the Eigen runtime agree: golden vectors, a libtorch eager forward, save/load.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "ruffini/decode/model_io.h"
+#include "ruffini/decode/network_decoder.h"
+#include "ruffini/error.h"
+#include "ruffini/eval/prepared.h"
+#include "ruffini/train/trainer.h"
+#include "ruffini/twin/protocols.h"
+#include "ruffini/twin/scene.h"
+
+namespace ruffini::train {
+namespace {
+
+struct Fixture {
+  twin::Scene scene = twin::LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
+  eval::Prepared prepared;
+  std::array<v1::DecoderModel, 2> models;  // W = 1 and W = 8
+  Fixture() {
+    const twin::SkinTwin t(scene.Patch().spec, scene.effects, {scene.probe.radius_mm});
+    dataset::Dataset d;
+    d.info = twin::TwinDatasetInfo(t, scene, "paper", 3, 100.0);
+    twin::PaperProtocol p;
+    p.indentations = 40;
+    twin::RunPaper(t, scene, p, 3, [&](std::span<const dataset::Frame> f) {
+      for (const auto& x : f) d.Append(x);
+    });
+    prepared = eval::PrepareFrames(d);
+    for (int k = 0; k < 2; ++k) {
+      TrainOptions o;
+      o.window = k == 0 ? 1 : 8;
+      o.mlp_widths = {16, 16, 16};
+      o.epochs_force = o.epochs_location = 2;
+      o.frames_per_epoch = 4096;
+      o.folds = 2;
+      o.threads = 1;
+      models[static_cast<std::size_t>(k)] = Train(prepared, scene.Patch().spec, o, "in-memory");
+    }
+  }
+};
+
+const Fixture& F() {
+  static const Fixture f;
+  return f;
+}
+
+TEST(TrainTest, ModelIsCompleteAndValid) {
+  for (const auto& m : F().models) {
+    EXPECT_NO_THROW(decode::ValidateModel(m, "trained"));
+    EXPECT_NO_THROW(decode::CheckModelMatchesPatch(m, F().scene.Patch().spec, "trained"));
+    EXPECT_EQ(m.location_size(), 4);
+    EXPECT_EQ(m.location(0).grid().name(), "SG");
+    EXPECT_EQ(m.location(3).grid().ny() * m.location(3).grid().nr(), 42u);
+    EXPECT_EQ(m.training().folds_size(), 2 * 6);  // 2 folds x (force, SG, VSG, HSG, DSG, union)
+    EXPECT_EQ(m.test_indentations_size(), 6);     // 15 % of 40
+    EXPECT_GE(m.golden_size(), 1);
+  }
+}
+
+// The Eigen runtime reproduces libtorch's outputs on the golden vectors to 1e-5 (float and double).
+TEST(TrainTest, RuntimeMatchesLibtorchOnGoldenVectors) {
+  for (const auto& m : F().models) {
+    decode::NetworkDecoder<float> df(m);
+    decode::NetworkDecoder<double> dd(m);
+    decode::NetworkDecoder<float>::Data af(df);
+    decode::NetworkDecoder<double>::Data ad(dd);
+    for (const auto& g : m.golden()) {
+      ASSERT_EQ(g.window_shift_pm_size(), static_cast<int>(m.force().window()) * 16);
+      const float ff = df.ForceOnWindow(g.window_shift_pm().data(), af);
+      const float fd = dd.ForceOnWindow(g.window_shift_pm().data(), ad);
+      EXPECT_NEAR(ff, g.force_n(), 1e-5 * std::max(1.0f, std::abs(g.force_n())));
+      EXPECT_NEAR(fd, g.force_n(), 1e-5 * std::max(1.0f, std::abs(g.force_n())));
+      decode::ShiftsPm last{};
+      const int base = (static_cast<int>(m.force().window()) - 1) * 16;
+      for (int i = 0; i < 16; ++i) last[static_cast<std::size_t>(i)] = g.window_shift_pm(base + i);
+      std::vector<float> p;
+      df.Probabilities(last, af, p);
+      ASSERT_EQ(static_cast<int>(p.size()), g.probabilities_size());
+      for (std::size_t k = 0; k < p.size(); ++k) EXPECT_NEAR(p[k], g.probabilities(static_cast<int>(k)), 1e-5);
+      double y = 0, r = 0;
+      df.nip().Locate(p, y, r);
+      EXPECT_NEAR(y, g.y_mm(), 1e-3);
+      EXPECT_NEAR(r, g.r_deg(), 1e-3);
+    }
+  }
+}
+
+TEST(TrainTest, TorchEagerForwardEqualsRuntime) {
+  const auto& m = F().models[1];
+  TorchForceNet torch_net(m);
+  decode::NetworkDecoder<float> d(m);
+  decode::NetworkDecoder<float>::Data a(d);
+  for (const auto& g : m.golden()) {
+    EXPECT_NEAR(torch_net.Forward(g.window_shift_pm().data()), d.ForceOnWindow(g.window_shift_pm().data(), a), 1e-5);
+  }
+}
+
+TEST(TrainTest, SaveLoadRoundTrip) {
+  const auto path = std::filesystem::temp_directory_path() / "ruffini_train_test.rmodel";
+  decode::SaveModel(path.string(), F().models[0]);
+  const auto back = decode::LoadModel(path.string());
+  EXPECT_EQ(back.SerializeAsString(), F().models[0].SerializeAsString());
+  std::filesystem::remove(path);
+}
+
+TEST(TrainTest, SameSeedSameModel) {
+  TrainOptions o;
+  o.mlp_widths = {8, 8, 8};
+  o.epochs_force = o.epochs_location = 1;
+  o.frames_per_epoch = 1024;
+  o.folds = 0;
+  o.threads = 1;
+  const auto a = Train(F().prepared, F().scene.Patch().spec, o, "x");
+  const auto b = Train(F().prepared, F().scene.Patch().spec, o, "x");
+  EXPECT_EQ(a.force().dense(1).weight().SerializeAsString(), b.force().dense(1).weight().SerializeAsString());
+  EXPECT_EQ(a.location(2).dense(3).weight().SerializeAsString(), b.location(2).dense(3).weight().SerializeAsString());
+}
+
+TEST(TrainTest, RejectsBadOptions) {
+  TrainOptions o;
+  o.mlp_widths = {8, 8};
+  EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
+}
+
+}  // namespace
+}  // namespace ruffini::train
