@@ -10,6 +10,7 @@
 #include "ruffini/dataset/dataset.h"
 #include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
+#include "ruffini/eval/evaluation.h"
 #include "ruffini/eval/prepared.h"
 #include "ruffini/patch/spec_loader.h"
 #ifdef RUFFINI_HAVE_TORCH
@@ -82,8 +83,49 @@ void RegisterTrain(CLI::App& app) {
 }
 #endif
 
+void RegisterEvaluate(CLI::App& app) {
+  struct Args {
+    std::string model, data, report, patch_spec = RUFFINI_DEFAULT_PATCH;
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("evaluate", "Evaluate a model on a dataset as the paper did; write a report folder");
+  cmd->add_option("--model", a->model, "Model file (.rmodel)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--data", a->data, "Dataset (.h5) the model was trained on (its held-out indentations are the test set)")
+      ->required()->check(CLI::ExistingFile);
+  cmd->add_option("--report", a->report, "Report folder (report.md, pictures, predictions.h5)")->required();
+  cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
+  cmd->callback([a, cmd]() {
+    const patch::PatchSpec spec = patch::LoadPatchSpec(a->patch_spec);
+    const v1::DecoderModel m = decode::LoadModel(a->model);
+    decode::CheckModelMatchesPatch(m, spec, a->model);
+    const dataset::Dataset d = dataset::ReadDataset(a->data);
+    if (d.info.patch_name != m.patch_name()) {
+      throw InputError(a->data + ": dataset is from patch '" + d.info.patch_name + "', the model is for '" + m.patch_name() + "'");
+    }
+    const eval::Prepared p = eval::PrepareFrames(d);
+    std::vector<std::int32_t> test(m.test_indentations().begin(), m.test_indentations().end());
+    eval::NetworkFrameDecoder<float> dec(m);
+    std::unique_ptr<ProgressBar> bar;
+    const auto pred = eval::RunDecoder(dec, p, test, [&](std::uint64_t done, std::uint64_t total) {
+      if (!bar) bar = std::make_unique<ProgressBar>("decoding frames", total);
+      bar->Update(done);
+    });
+    if (bar) bar->Finish();
+    const auto ev = eval::Evaluate(p, pred, spec);
+    const std::string command = "ruffini evaluate --model " + a->model + " --data " + a->data + " --report " + a->report;
+    eval::WriteReport(a->report, m, a->data, p, pred, ev, spec, command);
+    std::printf("test set: force %.1f mN (IQR %.1f), location %.2f mm (IQR %.2f); report in %s/report.md\n",
+                ev.force_error_mn.median, ev.force_error_mn.iqr(), ev.location_error_mm.median, ev.location_error_mm.iqr(),
+                a->report.c_str());
+    (void)cmd;
+  });
+}
+
 }  // namespace
 
-void RegisterDecodeCommands(CLI::App& app) { RegisterTrain(app); }
+void RegisterDecodeCommands(CLI::App& app) {
+  RegisterTrain(app);
+  RegisterEvaluate(app);
+}
 
 }  // namespace ruffini::cli

@@ -123,6 +123,22 @@ void NetworkDecoder<Scalar>::RunForce(Data& d) const noexcept {
 }
 
 template <typename Scalar>
+void NetworkDecoder<Scalar>::Reset(Data& d, const ShiftsPm* fill) const noexcept {
+  d.gate = false;
+  d.head = 0;
+  d.filled = 0;
+  if (fill == nullptr) return;
+  for (int t = 0; t < window_ - 1; ++t) {
+    for (std::size_t i = 0; i < 16; ++i) {
+      const Scalar raw = std::isfinite((*fill)[i]) ? static_cast<Scalar>((*fill)[i]) : f_mean_[i];
+      d.window(t, static_cast<Eigen::Index>(i)) = (raw - f_mean_[i]) * f_inv_std_[i];
+    }
+  }
+  d.head = (window_ - 1) % window_;
+  d.filled = window_ - 1;
+}
+
+template <typename Scalar>
 float NetworkDecoder<Scalar>::ForceOnWindow(const float* w, Data& d) const noexcept {
   for (int t = 0; t < window_; ++t) {
     for (int i = 0; i < 16; ++i) {

@@ -60,6 +60,9 @@ class NetworkDecoder {
 
   // Real-time safe: no allocation, no lock, no throw.
   DecodeOutput Decode(const ShiftsPm& shift_pm, Data& data) const noexcept;
+  // Forgets the stream (window, gate); optionally fills the window with one frame, as if it had been
+  // there for W frames (evaluation starts each indentation this way, as training did). Real-time safe.
+  void Reset(Data& data, const ShiftsPm* fill = nullptr) const noexcept;
   // The force net alone on an explicit window (oldest first, W x 16 shifts), for golden vectors and tests.
   float ForceOnWindow(const float* window_shift_pm, Data& data) const noexcept;
   // Location probabilities (all selected nets, concatenated) for one frame of shifts.
