@@ -303,7 +303,7 @@ void WriteReport(const std::string& dir, const v1::DecoderModel& m, const std::s
            F("%.0f mN", ev.rg_force_error_mn.median) + " (IQR " + F("%.0f", ev.rg_force_error_mn.iqr()) + "), guess " + F("%.0f mN", ev.rg_force_guess_n * 1e3));
   o << Row("random-guess location error", "34.72 mm (IQR 24.68)",
            F("%.2f mm", ev.rg_location_error_mm.median) + " (IQR " + F("%.2f", ev.rg_location_error_mm.iqr()) + ")");
-  auto pv = [](double p) { return p > 0 ? "p = " + F("%.3g", p) : std::string("p < 1e-300"); };
+  auto pv = [](double pval) { return pval > 0 ? "p = " + F("%.3g", pval) : std::string("p < 1e-300"); };
   o << Row("Wilcoxon vs random guess, force", "p < 0.001", pv(ev.force_wilcoxon.p_two_sided) + " (n = " + std::to_string(ev.force_wilcoxon.n) + ")");
   o << Row("Wilcoxon vs random guess, location", "p < 0.001", pv(ev.location_wilcoxon.p_two_sided) + " (n = " + std::to_string(ev.location_wilcoxon.n) + ")");
   o << Row("Cohen's d (paired) force / location", "0.84 / 1.90", F("%.2f", ev.force_cohens_d) + " / " + F("%.2f", ev.location_cohens_d));
