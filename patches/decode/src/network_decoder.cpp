@@ -7,6 +7,16 @@
 #include "ruffini/error.h"
 
 namespace ruffini::decode {
+namespace {
+// Inputs are z-scored with the training statistics. A z-score beyond +-kMaxZ lies far outside anything the
+// nets were trained on (a channel that never moved in training has std 1e-3 pm); clamping keeps every
+// activation finite in float instead of letting it overflow to inf and NaN.
+constexpr double kMaxZ = 1e3;
+template <typename Scalar>
+Scalar ZScore(Scalar raw, Scalar mean, Scalar inv_std) noexcept {
+  return std::clamp((raw - mean) * inv_std, Scalar(-kMaxZ), Scalar(kMaxZ));
+}
+}  // namespace
 
 template <typename Scalar>
 NetworkDecoder<Scalar>::NetworkDecoder(const v1::DecoderModel& m, DecoderOptions options)
@@ -131,7 +141,7 @@ void NetworkDecoder<Scalar>::Reset(Data& d, const ShiftsPm* fill) const noexcept
   for (int t = 0; t < window_ - 1; ++t) {
     for (std::size_t i = 0; i < 16; ++i) {
       const Scalar raw = std::isfinite((*fill)[i]) ? static_cast<Scalar>((*fill)[i]) : f_mean_[i];
-      d.window(t, static_cast<Eigen::Index>(i)) = (raw - f_mean_[i]) * f_inv_std_[i];
+      d.window(t, static_cast<Eigen::Index>(i)) = ZScore(raw, f_mean_[i], f_inv_std_[i]);
     }
   }
   d.head = (window_ - 1) % window_;
@@ -143,7 +153,7 @@ float NetworkDecoder<Scalar>::ForceOnWindow(const float* w, Data& d) const noexc
   for (int t = 0; t < window_; ++t) {
     for (int i = 0; i < 16; ++i) {
       const auto ui = static_cast<std::size_t>(i);
-      d.flat[t * 16 + i] = (static_cast<Scalar>(w[t * 16 + i]) - f_mean_[ui]) * f_inv_std_[ui];
+      d.flat[t * 16 + i] = ZScore(static_cast<Scalar>(w[t * 16 + i]), f_mean_[ui], f_inv_std_[ui]);
     }
   }
   RunForce(d);
@@ -155,7 +165,7 @@ void NetworkDecoder<Scalar>::RunLocation(const std::array<Scalar, 16>& raw, Data
   std::size_t offset = 0;
   for (const Mlp& m : location_) {
     Vector& in = d.loc[2];
-    for (std::size_t i = 0; i < 16; ++i) in[static_cast<Eigen::Index>(i)] = (raw[i] - m.mean[i]) * m.inv_std[i];
+    for (std::size_t i = 0; i < 16; ++i) in[static_cast<Eigen::Index>(i)] = ZScore(raw[i], m.mean[i], m.inv_std[i]);
     const Vector* x = &in;
     Eigen::Index n = 16;
     for (std::size_t k = 0; k < m.layers.size(); ++k) {
@@ -168,7 +178,7 @@ void NetworkDecoder<Scalar>::RunLocation(const std::array<Scalar, 16>& raw, Data
       x = &y;
       n = rows;
     }
-    // Stable softmax: subtract the largest logit.
+    // Stable softmax: subtract the largest logit (no overflow however large the logits are).
     const Scalar top = x->head(n).maxCoeff();
     Scalar sum = 0;
     for (Eigen::Index k = 0; k < n; ++k) sum += std::exp((*x)[k] - top);
@@ -194,7 +204,7 @@ DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) cons
     }
   }
   out.missing = static_cast<std::uint8_t>(missing);
-  for (std::size_t i = 0; i < 16; ++i) d.window(d.head, static_cast<Eigen::Index>(i)) = (raw[i] - f_mean_[i]) * f_inv_std_[i];
+  for (std::size_t i = 0; i < 16; ++i) d.window(d.head, static_cast<Eigen::Index>(i)) = ZScore(raw[i], f_mean_[i], f_inv_std_[i]);
   d.head = (d.head + 1) % window_;
   d.filled = std::min(d.filled + 1, window_);
   if (missing > max_missing_ || d.filled < window_) {

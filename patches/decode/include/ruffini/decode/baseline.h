@@ -5,7 +5,9 @@
 // its running mean are averaged (a touch during capture restarts it). Then the baseline follows slow drift
 // (temperature) with a first-order filter of time constant drift_tau_s, but only while untouched: any
 // |shift| above touch_on_pm freezes it until every shift has stayed below touch_off_pm for release_frames
-// frames, so a long press is never eaten. A missing peak (NaN) leaves its baseline alone.
+// frames, so a long press is never eaten. A missing peak (NaN) leaves its baseline alone. The filter lags a
+// drift by rate x drift_tau_s: drift faster than touch_on_pm / drift_tau_s (0.1 pm/s by default, about
+// 0.01 C/s) reads as a touch and freezes the baseline until it settles.
 // Real-time safe: no allocation, no lock, no throw.
 #include <array>
 #include <cstdint>

@@ -1,0 +1,352 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+
+#include "ruffini/decode/baseline.h"
+#include "ruffini/decode/grids.h"
+#include "ruffini/decode/model_io.h"
+#include "ruffini/decode/network_decoder.h"
+#include "ruffini/error.h"
+#include "ruffini/patch/spec_loader.h"
+#include "synthetic_model.h"
+
+namespace ruffini::decode {
+namespace {
+
+const patch::PatchSpec& Spec() {
+  static const patch::PatchSpec s = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
+  return s;
+}
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+ShiftsPm Shifts(float v) {
+  ShiftsPm s;
+  s.fill(v);
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Grids and NIP.
+
+TEST(GridsTest, PaperGridSizes) {
+  const auto g = PaperGrids(Spec().indented_area);
+  EXPECT_EQ(g[0].classes(), 30);
+  EXPECT_EQ(g[1].classes(), 35);
+  EXPECT_EQ(g[2].classes(), 36);
+  EXPECT_EQ(g[3].classes(), 42);
+  EXPECT_DOUBLE_EQ(g[0].cell_y_mm, 20.0);
+  EXPECT_DOUBLE_EQ(g[0].cell_r_deg, 18.0);
+  // Every point of the indented area falls in exactly one cell of every grid.
+  for (double y = 15.01; y < 135; y += 3.7) {
+    for (double r = 27.51; r < 117.5; r += 2.9) {
+      for (const auto& gr : g) EXPECT_GE(gr.ClassOf(y, r), 0) << gr.name << " " << y << " " << r;
+    }
+  }
+  EXPECT_EQ(g[0].ClassOf(14.0, 50.0), -1);
+}
+
+TEST(GridsTest, NipPutsAOneHotContactAtTheSharedFineCell) {
+  const auto g = PaperGrids(Spec().indented_area);
+  const Nip nip(g);
+  EXPECT_EQ(nip.inputs(), 30u + 35u + 36u + 42u);
+  EXPECT_EQ(nip.fine_cells(), 14u * 12u);
+  // Each net certain of the cell containing (y, r): the fused estimate is the centre of the fine cell
+  // (10 mm x 9 deg) that holds the point.
+  const double y = 61.0, r = 70.0;
+  std::vector<float> p(nip.inputs(), 0.0f);
+  std::size_t off = 0;
+  for (const auto& gr : g) {
+    p[off + static_cast<std::size_t>(gr.ClassOf(y, r))] = 1.0f;
+    off += static_cast<std::size_t>(gr.classes());
+  }
+  double ey = 0, er = 0;
+  const double conf = nip.Locate(p, ey, er);
+  EXPECT_NEAR(ey, 60.0, 1e-9);   // fine cell 55..65 mm
+  EXPECT_NEAR(er, 68.0, 1e-9);   // fine cell 63.5..72.5 deg
+  EXPECT_NEAR(conf, 1.0, 1e-9);
+  // The fused weight also covers the neighbouring fine cells of each one-hot cell: a spread of a few mm,
+  // far below that of uninformative (uniform) probabilities.
+  const double sharp = nip.Spread(p, ey, er, 37.4);
+  std::vector<float> flat(nip.inputs(), 0.03f);
+  double fy = 0, fr = 0;
+  nip.Locate(flat, fy, fr);
+  EXPECT_GT(sharp, 1.0);
+  EXPECT_LT(sharp, 0.5 * nip.Spread(flat, fy, fr, 37.4));
+  // All zero: no estimate, confidence 0, inputs untouched.
+  std::fill(p.begin(), p.end(), 0.0f);
+  ey = -1;
+  EXPECT_EQ(nip.Locate(p, ey, er), 0.0);
+  EXPECT_EQ(ey, -1);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Baseline.
+
+TEST(BaselineTest, CapturesThenTracksDriftButNotAPress) {
+  BaselineConfig c;
+  c.capture_frames = 50;
+  c.drift_tau_s = 5.0;
+  BaselineTracker t(c);
+  Wavelengths wl;
+  for (std::size_t i = 0; i < 16; ++i) wl[i] = 1530.0 + 2.3 * static_cast<double>(i) + 0.4;  // +40 C: +400 pm
+  ShiftsPm s;
+  for (int k = 0; k < 50; ++k) EXPECT_FALSE(t.Update(wl, s));
+  EXPECT_EQ(t.state(), BaselineTracker::State::kTracking);
+  ASSERT_TRUE(t.Update(wl, s));
+  for (float v : s) EXPECT_NEAR(v, 0.0f, 1e-3f);
+  // Slow drift while untouched (0.1 pm/s, 30x a lab's 1 C/hour) is followed: the shift stays small.
+  // (The tracker lags by rate x tau; a drift faster than touch_on_pm / drift_tau_s reads as a touch.)
+  for (int k = 0; k < 3000; ++k) {
+    for (auto& w : wl) w += 1e-6;
+    t.Update(wl, s);
+  }
+  EXPECT_LT(std::abs(s[3]), 1.0f);
+  // A 60 s press of 20 pm (6000 frames at 100 Hz, 12 time constants) is not eaten.
+  wl[5] += 0.020;
+  for (int k = 0; k < 6000; ++k) t.Update(wl, s);
+  EXPECT_EQ(t.state(), BaselineTracker::State::kFrozen);
+  EXPECT_NEAR(s[5], 20.0f, 0.5f);
+  // Release: back to tracking after release_frames quiet frames.
+  wl[5] -= 0.020;
+  for (int k = 0; k < c.release_frames + 1; ++k) t.Update(wl, s);
+  EXPECT_EQ(t.state(), BaselineTracker::State::kTracking);
+}
+
+TEST(BaselineTest, TouchDuringCaptureRestartsItAndMissingPeaksStayNaN) {
+  BaselineConfig c;
+  c.capture_frames = 10;
+  BaselineTracker t(c);
+  Wavelengths wl;
+  wl.fill(1550.0);
+  wl[2] = std::nan("");
+  ShiftsPm s;
+  for (int k = 0; k < 5; ++k) t.Update(wl, s);
+  wl[0] += 0.050;  // a touch: capture starts again
+  for (int k = 0; k < 9; ++k) EXPECT_FALSE(t.Update(wl, s));
+  t.Update(wl, s);
+  EXPECT_EQ(t.state(), BaselineTracker::State::kTracking);
+  t.Update(wl, s);
+  EXPECT_NEAR(s[0], 0.0f, 1e-3f);  // the baseline is the new level, not a mix
+  EXPECT_TRUE(std::isnan(s[2]));
+  EXPECT_TRUE(std::isnan(t.baseline_nm()[2]));
+}
+
+// ---------------------------------------------------------------------------------------------------
+// The network runtime at the extremes (synthetic model with a known force function).
+
+TEST(DecoderTest, KnownForceFunction) {
+  const auto m = testing::SyntheticModel(Spec());
+  NetworkDecoder<float> d(m);
+  NetworkDecoder<float>::Data data(d);
+  ShiftsPm s = Shifts(0.0f);
+  s[3] = 120.0f;   // max of gratings 0..7
+  s[12] = 30.0f;   // max of gratings 8..15
+  const auto o = d.Decode(s, data);
+  EXPECT_TRUE(o.valid);
+  EXPECT_NEAR(o.force_n, 0.150f, 1e-6f);
+  EXPECT_TRUE(o.in_contact);
+  EXPECT_TRUE(o.located);
+}
+
+TEST(DecoderTest, AllZeroAndHugeInputsStayFinite) {
+  for (int window : {1, 8}) {
+    const auto m = testing::SyntheticModel(Spec(), window, 1.0f);
+    NetworkDecoder<float> d(m);
+    NetworkDecoder<double> dd(m);
+    NetworkDecoder<float>::Data a(d);
+    NetworkDecoder<double>::Data ad(dd);
+    for (float v : {0.0f, 5000.0f, -5000.0f}) {  // 0 and +-5 nm on every grating
+      for (int k = 0; k < window + 2; ++k) {
+        const auto o = d.Decode(Shifts(v), a);
+        const auto od = dd.Decode(Shifts(v), ad);
+        EXPECT_TRUE(std::isfinite(o.force_n));
+        EXPECT_TRUE(std::isfinite(od.force_n));
+        if (o.located) {
+          EXPECT_TRUE(std::isfinite(o.y_mm) && std::isfinite(o.r_deg) && std::isfinite(o.confidence));
+        }
+      }
+    }
+    EXPECT_EQ(d.Decode(Shifts(0.0f), a).force_n, 0.0f);
+  }
+}
+
+TEST(DecoderTest, NotEnoughHistoryIsInvalidNotGarbage) {
+  const auto m = testing::SyntheticModel(Spec(), 8);
+  NetworkDecoder<float> d(m);
+  NetworkDecoder<float>::Data a(d);
+  for (int k = 0; k < 7; ++k) EXPECT_FALSE(d.Decode(Shifts(100.0f), a).valid);
+  EXPECT_TRUE(d.Decode(Shifts(100.0f), a).valid);
+}
+
+TEST(DecoderTest, MissingChannelsAreDecodedFromTheOthersOrFlagged) {
+  const auto m = testing::SyntheticModel(Spec());
+  NetworkDecoder<float> d(m);
+  NetworkDecoder<float>::Data a(d);
+  ShiftsPm s = Shifts(0.0f);
+  s[3] = 120.0f;
+  s[9] = kNaN;                                      // a dead grating
+  s[10] = std::numeric_limits<float>::infinity();  // a garbled one
+  const auto o = d.Decode(s, a);
+  EXPECT_TRUE(o.valid);
+  EXPECT_EQ(o.missing, 2);
+  EXPECT_NEAR(o.force_n, 0.120f, 1e-6f);
+  // More than max_missing (3): invalid, force 0, never NaN.
+  for (std::size_t i = 0; i < 4; ++i) s[i + 4] = kNaN;
+  const auto bad = d.Decode(s, a);
+  EXPECT_FALSE(bad.valid);
+  EXPECT_FALSE(bad.located);
+  EXPECT_EQ(bad.force_n, 0.0f);
+}
+
+TEST(DecoderTest, HugeLogitsGiveAProperSoftmax) {
+  const auto m = testing::SyntheticModel(Spec(), 1, 1e6f);  // logits ~ 1e6 x shifts
+  NetworkDecoder<float> d(m);
+  NetworkDecoder<float>::Data a(d);
+  ShiftsPm s = Shifts(0.0f);
+  s[0] = 400.0f;
+  s[1] = 300.0f;
+  std::vector<float> p;
+  d.Probabilities(s, a, p);
+  double sum = 0;
+  for (float v : p) {
+    ASSERT_TRUE(std::isfinite(v));
+    ASSERT_GE(v, 0.0f);
+    sum += v;
+  }
+  EXPECT_NEAR(sum, 4.0, 1e-4);  // four nets, each sums to 1
+  const auto o = d.Decode(s, a);
+  EXPECT_TRUE(o.located);
+  EXPECT_TRUE(std::isfinite(o.y_mm) && std::isfinite(o.r_deg));
+}
+
+TEST(DecoderTest, NearZeroStdChannelStaysFinite) {
+  const auto m = testing::SyntheticModel(Spec(), 1, 1.0f, 1e-3f);  // every channel std 1e-3 pm
+  NetworkDecoder<float> d(m);
+  NetworkDecoder<float>::Data a(d);
+  const auto o = d.Decode(Shifts(5000.0f), a);
+  EXPECT_TRUE(o.valid);
+  EXPECT_TRUE(std::isfinite(o.force_n));
+}
+
+// Forces hovering around the 50 mN gate: the gate opens once and does not flap.
+TEST(DecoderTest, GateHysteresisDoesNotFlap) {
+  const auto m = testing::SyntheticModel(Spec());
+  NetworkDecoder<float> d(m);
+  NetworkDecoder<float>::Data a(d);
+  int changes = 0;
+  bool last = false;
+  for (int k = 0; k < 200; ++k) {
+    ShiftsPm s = Shifts(0.0f);
+    s[0] = 50.0f + 3.0f * static_cast<float>(std::sin(k * 0.7));  // 47..53 mN: crosses 50 often
+    const auto o = d.Decode(s, a);
+    if (o.in_contact != last) ++changes;
+    last = o.in_contact;
+  }
+  EXPECT_EQ(changes, 1);
+  EXPECT_TRUE(last);
+  ShiftsPm s = Shifts(0.0f);
+  s[0] = 39.0f;  // below off (40 mN): closes
+  EXPECT_FALSE(d.Decode(s, a).in_contact);
+  EXPECT_FALSE(d.Decode(s, a).located);
+}
+
+TEST(DecoderTest, EstimatesStayInsideTheGridsAtTheEdges) {
+  const auto m = testing::SyntheticModel(Spec(), 1, 50.0f);
+  NetworkDecoder<float> d(m);
+  NetworkDecoder<float>::Data a(d);
+  const auto& area = Spec().indented_area;
+  for (int k = 0; k < 16; ++k) {
+    ShiftsPm s = Shifts(0.0f);
+    s[static_cast<std::size_t>(k)] = 500.0f;
+    s[0] = std::max(s[0], 60.0f);
+    const auto o = d.Decode(s, a);
+    ASSERT_TRUE(o.located);
+    EXPECT_GE(o.y_mm, area.y_min_mm - 10.0);
+    EXPECT_LE(o.y_mm, area.y_max_mm + 10.0);
+    EXPECT_GE(o.r_deg, area.r_min_deg - 9.0);
+    EXPECT_LE(o.r_deg, area.r_max_deg + 9.0);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Model files.
+
+class ModelFileTest : public ::testing::Test {
+ protected:
+  std::string path = (std::filesystem::temp_directory_path() / "ruffini_decode_test.rmodel").string();
+  void TearDown() override { std::filesystem::remove(path); }
+  std::string Error() {
+    try {
+      (void)LoadModel(path);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "no error";
+  }
+};
+
+TEST_F(ModelFileTest, RoundTrip) {
+  const auto m = testing::SyntheticModel(Spec(), 4);
+  SaveModel(path, m);
+  EXPECT_EQ(LoadModel(path).SerializeAsString(), m.SerializeAsString());
+}
+
+TEST_F(ModelFileTest, TruncatedFileIsRejected) {
+  SaveModel(path, testing::SyntheticModel(Spec()));
+  const auto size = std::filesystem::file_size(path);
+  std::filesystem::resize_file(path, size - 100);
+  EXPECT_NE(Error().find("truncated or padded model file"), std::string::npos) << Error();
+}
+
+TEST_F(ModelFileTest, CorruptedFileIsRejected) {
+  SaveModel(path, testing::SyntheticModel(Spec()));
+  {
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(200);
+    f.put('\x7f');
+  }
+  EXPECT_NE(Error().find("checksum mismatch"), std::string::npos) << Error();
+  std::ofstream(path) << "hello";
+  EXPECT_NE(Error().find("not a ruffini model file"), std::string::npos) << Error();
+}
+
+TEST_F(ModelFileTest, WrongVersionIsRejected) {
+  auto m = testing::SyntheticModel(Spec());
+  m.set_format_version(2);
+  SaveModel(path, m);
+  EXPECT_NE(Error().find("model format version 2, this build reads version 1"), std::string::npos) << Error();
+}
+
+TEST_F(ModelFileTest, ShapeMismatchesAreRejected) {
+  auto m = testing::SyntheticModel(Spec());
+  m.mutable_force()->mutable_conv(1)->mutable_weight()->mutable_values()->RemoveLast();
+  SaveModel(path, m);
+  EXPECT_NE(Error().find("force net conv[1] weight declares 4096 values but holds 4095"), std::string::npos) << Error();
+  m = testing::SyntheticModel(Spec());
+  m.mutable_location(2)->mutable_grid()->set_nr(7);
+  SaveModel(path, m);
+  EXPECT_NE(Error().find("location net HSG outputs do not match its grid's 42 cells"), std::string::npos) << Error();
+  m = testing::SyntheticModel(Spec());
+  m.mutable_force()->mutable_input()->set_std(3, 0.0f);
+  SaveModel(path, m);
+  EXPECT_NE(Error().find("force net normalisation entry 3 has std 0"), std::string::npos) << Error();
+}
+
+TEST_F(ModelFileTest, ModelForAnotherPatchIsRejected) {
+  const auto m = testing::SyntheticModel(Spec());
+  patch::PatchSpec other = Spec();
+  other.gratings[4].centre.y_mm += 1.0;
+  EXPECT_NO_THROW(CheckModelMatchesPatch(m, Spec(), "m"));
+  try {
+    CheckModelMatchesPatch(m, other, "m.rmodel");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("m.rmodel: model was trained for patch 'forearm' (spec fingerprint"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace ruffini::decode
