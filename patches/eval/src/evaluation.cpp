@@ -46,6 +46,20 @@ std::vector<double> Edges(double lo, double hi, int n) {
 
 }  // namespace
 
+decode::ResponseModel FitResponse(const Prepared& p, const patch::PatchSpec& spec, const std::vector<std::int32_t>& test_ids) {
+  const std::set<std::int32_t> test(test_ids.begin(), test_ids.end());
+  std::vector<decode::ShiftsPm> s;
+  std::vector<float> f, y, r;
+  for (std::size_t k = 0; k < p.size(); ++k) {
+    if (p.indentation[k] < 0 || test.count(p.indentation[k])) continue;
+    s.push_back(p.shift_pm[k]);
+    f.push_back(p.force_n[k]);
+    y.push_back(p.y_mm[k]);
+    r.push_back(p.r_deg[k]);
+  }
+  return decode::ResponseModel::Fit(s, f, y, r, spec.indented_area, spec.surface_radius_mm);
+}
+
 Predictions RunDecoder(FrameDecoder& dec, const Prepared& p, const std::vector<std::int32_t>& test_ids,
                        const std::function<void(std::uint64_t, std::uint64_t)>& progress) {
   Predictions out;

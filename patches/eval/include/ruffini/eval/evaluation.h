@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "ruffini/decode/inversion.h"
 #include "ruffini/decode/network_decoder.h"
 #include "ruffini/eval/prepared.h"
 #include "ruffini/hypothesis.h"
@@ -38,6 +39,19 @@ class NetworkFrameDecoder final : public FrameDecoder {
   decode::NetworkDecoder<Scalar> decoder_;
   typename decode::NetworkDecoder<Scalar>::Data data_;
 };
+
+class InversionFrameDecoder final : public FrameDecoder {
+ public:
+  explicit InversionFrameDecoder(const decode::InversionDecoder& d) : decoder_(d) {}
+  void Reset(const decode::ShiftsPm*) override {}
+  decode::DecodeOutput Decode(const decode::ShiftsPm& s) override { return decoder_.Decode(s); }
+
+ private:
+  const decode::InversionDecoder& decoder_;
+};
+
+// The inversion decoder's response map, learned from the frames of every indentation not in `test_ids`.
+decode::ResponseModel FitResponse(const Prepared& data, const patch::PatchSpec& spec, const std::vector<std::int32_t>& test_ids);
 
 struct Predictions {
   std::vector<float> force_n, y_mm, r_deg;
