@@ -14,106 +14,104 @@ namespace ruffini::decode {
 ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vector<float>& force,
                                  const std::vector<float>& y, const std::vector<float>& r, const patch::Region& a,
                                  double radius_mm, double min_force_n) {
+  // 1. Sites: consecutive frames at one probe position (an indentation). At each site, least squares of
+  //    every grating's shift on (F, F^2) gives its sensitivity g = slope at small force and the curvature.
+  struct Site {
+    double y, r;
+    std::array<double, 16> g;
+    double curvature;  // b / a of s = a F + b F^2 on the strongest grating
+  };
+  std::vector<Site> sites;
+  std::size_t k = 0;
+  while (k < s.size()) {
+    std::size_t e = k;
+    while (e < s.size() && y[e] == y[k] && r[e] == r[k]) ++e;
+    if (std::isfinite(y[k]) && std::isfinite(r[k])) {
+      double s11 = 0, s12 = 0, s22 = 0;
+      std::array<double, 16> t1{}, t2{};
+      int n = 0;
+      for (std::size_t j = k; j < e; ++j) {
+        const double f = force[j];
+        if (!(f > min_force_n)) continue;
+        s11 += f * f;
+        s12 += f * f * f;
+        s22 += f * f * f * f;
+        for (std::size_t i = 0; i < 16; ++i) {
+          const double v = std::isfinite(s[j][i]) ? s[j][i] : 0.0;
+          t1[i] += v * f;
+          t2[i] += v * f * f;
+        }
+        ++n;
+      }
+      const double det = s11 * s22 - s12 * s12;
+      if (n >= 8 && det > 1e-12) {
+        Site site{y[k], r[k], {}, 0.0};
+        double best = 0, best_b = 0;
+        for (std::size_t i = 0; i < 16; ++i) {
+          const double ai = (t1[i] * s22 - t2[i] * s12) / det, bi = (t2[i] * s11 - t1[i] * s12) / det;
+          site.g[i] = ai;
+          if (std::abs(ai) > std::abs(best)) {
+            best = ai;
+            best_b = bi;
+          }
+        }
+        site.curvature = best != 0 ? best_b / best : 0.0;
+        if (std::abs(best) > 5.0) sites.push_back(site);  // a clear signal
+        else site.curvature = 0.0;
+        if (std::abs(best) <= 5.0) sites.push_back(Site{site.y, site.r, site.g, std::nan("")});
+      }
+    }
+    k = e;
+  }
+  if (sites.empty()) {
+    throw InputError("inversion: no indentation with frames above " + std::to_string(min_force_n) + " N to learn from");
+  }
   ResponseModel m;
   m.surface_radius_mm = radius_mm;
-  m.dy_mm = 3.0;
-  m.dr_deg = 3.0;
+  m.dy_mm = 1.5;
+  m.dr_deg = 1.5 * 180.0 / (std::numbers::pi * radius_mm);  // 1.5 mm of arc
   m.y0_mm = a.y_min_mm;
   m.r0_deg = a.r_min_deg;
   m.ny = static_cast<int>(std::ceil((a.y_max_mm - a.y_min_mm) / m.dy_mm)) + 1;
   m.nr = static_cast<int>(std::ceil((a.r_max_deg - a.r_min_deg) / m.dr_deg)) + 1;
-  const auto nodes = static_cast<std::size_t>(m.ny * m.nr);
-  // Two passes: g with c = 0 from moderate forces, then c from the ratio at all forces, then g again.
-  for (int pass = 0; pass < 3; ++pass) {
-    std::vector<std::array<double, 16>> num(nodes, std::array<double, 16>{});
-    std::vector<double> den(nodes, 0.0);
-    std::vector<double> ratio_x, ratio_y;
-    for (std::size_t k = 0; k < s.size(); ++k) {
-      const double f = force[k];
-      if (!(f > min_force_n) || !std::isfinite(y[k]) || !std::isfinite(r[k])) continue;
-      if (pass == 0 && f > 0.8) continue;
-      if (pass == 1) {  // stiffening: observed / predicted against force, where the signal is strong
-        std::array<double, 16> g{};
-        m.Eval(y[k], r[k], g);
-        double sg = 0, gg = 0;
-        for (std::size_t i = 0; i < 16; ++i) {
-          if (!std::isfinite(s[k][i])) continue;
-          sg += s[k][i] * g[i];
-          gg += g[i] * g[i];
+  std::vector<double> curv;
+  for (const auto& st : sites) {
+    if (std::isfinite(st.curvature)) curv.push_back(st.curvature);
+  }
+  if (!curv.empty()) {
+    std::nth_element(curv.begin(), curv.begin() + static_cast<std::ptrdiff_t>(curv.size() / 2), curv.end());
+    m.stiffening = std::clamp(curv[curv.size() / 2], -0.3, 0.3);
+  }
+  // 2. The map: Gaussian kernel regression of the site sensitivities (bandwidth h on the surface). The
+  //    bandwidth adapts to the site density: the local sites must cover the kernel.
+  const double mm_per_deg = std::numbers::pi * radius_mm / 180.0;
+  const double area_mm2 = (a.y_max_mm - a.y_min_mm) * (a.r_max_deg - a.r_min_deg) * mm_per_deg;
+  const double spacing = std::sqrt(area_mm2 / static_cast<double>(sites.size()));
+  const double h = std::clamp(0.6 * spacing, 0.75, 6.0);
+  const double cutoff2 = 9.0 * h * h;
+  m.g.assign(static_cast<std::size_t>(m.ny * m.nr), std::array<float, 16>{});
+  for (int iy = 0; iy < m.ny; ++iy) {
+    for (int ir = 0; ir < m.nr; ++ir) {
+      const double ny_mm = m.y0_mm + iy * m.dy_mm, nr_deg = m.r0_deg + ir * m.dr_deg;
+      std::array<double, 16> acc{};
+      double wsum = 0, nearest = 1e300;
+      std::size_t nearest_site = 0;
+      for (std::size_t j = 0; j < sites.size(); ++j) {
+        const double dy = sites[j].y - ny_mm, da = (sites[j].r - nr_deg) * mm_per_deg;
+        const double d2 = dy * dy + da * da;
+        if (d2 < nearest) {
+          nearest = d2;
+          nearest_site = j;
         }
-        if (gg > 0) {
-          ratio_x.push_back(f);
-          ratio_y.push_back(sg / (gg * f));
-        }
-        continue;
+        if (d2 > cutoff2) continue;
+        const double w = std::exp(-0.5 * d2 / (h * h));
+        for (std::size_t i = 0; i < 16; ++i) acc[i] += w * sites[j].g[i];
+        wsum += w;
       }
-      const double fe = f * (1.0 + m.stiffening * f);
-      // Bilinear splat onto the 4 surrounding nodes.
-      const double fy = std::clamp((y[k] - m.y0_mm) / m.dy_mm, 0.0, m.ny - 1.000001);
-      const double fr = std::clamp((r[k] - m.r0_deg) / m.dr_deg, 0.0, m.nr - 1.000001);
-      const int iy = static_cast<int>(fy), ir = static_cast<int>(fr);
-      const double wy = fy - iy, wr = fr - ir;
-      const double w[4] = {(1 - wy) * (1 - wr), (1 - wy) * wr, wy * (1 - wr), wy * wr};
-      const int idx[4] = {iy * m.nr + ir, iy * m.nr + ir + 1, (iy + 1) * m.nr + ir, (iy + 1) * m.nr + ir + 1};
-      for (int c = 0; c < 4; ++c) {
-        const auto n = static_cast<std::size_t>(idx[c]);
-        for (std::size_t i = 0; i < 16; ++i) num[n][i] += w[c] * (std::isfinite(s[k][i]) ? s[k][i] : 0.0) * fe;
-        den[n] += w[c] * fe * fe;
+      auto& out = m.g[static_cast<std::size_t>(iy * m.nr + ir)];
+      for (std::size_t i = 0; i < 16; ++i) {
+        out[i] = static_cast<float>(wsum > 1e-9 ? acc[i] / wsum : sites[nearest_site].g[i]);
       }
-    }
-    if (pass == 1) {
-      // ratio = 1 + c f (least squares through the intercept-free form ratio - 1 = c f, using the mean level).
-      if (ratio_x.empty()) continue;
-      double mean_ratio_low = 0, n_low = 0, sxy = 0, sxx = 0;
-      for (std::size_t k = 0; k < ratio_x.size(); ++k) {
-        if (ratio_x[k] < 0.5) {
-          mean_ratio_low += ratio_y[k];
-          ++n_low;
-        }
-      }
-      const double base = n_low > 0 ? mean_ratio_low / n_low : 1.0;
-      for (std::size_t k = 0; k < ratio_x.size(); ++k) {
-        sxy += ratio_x[k] * (ratio_y[k] / base - 1.0);
-        sxx += ratio_x[k] * ratio_x[k];
-      }
-      m.stiffening = sxx > 0 ? std::clamp(sxy / sxx, -0.3, 0.3) : 0.0;
-      continue;
-    }
-    m.g.assign(nodes, std::array<float, 16>{});
-    std::vector<char> have(nodes, 0);
-    std::size_t filled = 0;
-    for (std::size_t n = 0; n < nodes; ++n) {
-      if (den[n] > 1e-6) {
-        for (std::size_t i = 0; i < 16; ++i) m.g[n][i] = static_cast<float>(num[n][i] / den[n]);
-        have[n] = 1;
-        ++filled;
-      }
-    }
-    if (filled == 0) throw InputError("inversion: no frames above " + std::to_string(min_force_n) + " N with positions to learn from");
-    // Nodes no indentation reached: average of their filled neighbours, repeated until all are set.
-    while (filled < nodes) {
-      std::vector<char> next = have;
-      for (int iy = 0; iy < m.ny; ++iy) {
-        for (int ir = 0; ir < m.nr; ++ir) {
-          const auto n = static_cast<std::size_t>(iy * m.nr + ir);
-          if (have[n]) continue;
-          std::array<double, 16> acc{};
-          int cnt = 0;
-          for (const auto& d : {std::pair{-1, 0}, std::pair{1, 0}, std::pair{0, -1}, std::pair{0, 1}}) {
-            const int jy = iy + d.first, jr = ir + d.second;
-            if (jy < 0 || jy >= m.ny || jr < 0 || jr >= m.nr) continue;
-            const auto nn = static_cast<std::size_t>(jy * m.nr + jr);
-            if (!have[nn]) continue;
-            for (std::size_t i = 0; i < 16; ++i) acc[i] += m.g[nn][i];
-            ++cnt;
-          }
-          if (cnt == 0) continue;
-          for (std::size_t i = 0; i < 16; ++i) m.g[n][i] = static_cast<float>(acc[i] / cnt);
-          next[n] = 1;
-          ++filled;
-        }
-      }
-      have.swap(next);
     }
   }
   return m;
