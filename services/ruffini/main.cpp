@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   app.set_help_all_flag("--help-all", "Show help for every subcommand");
   ruffini::cli::RegisterTwinCommands(app);
   ruffini::cli::RegisterDecodeCommands(app);
+  ruffini::cli::RegisterBenchCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -444,6 +444,9 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
 
 struct TorchForceNet::Impl {
   ForceNet net{nullptr};
+  std::vector<Mlp> mlps;
+  std::vector<Norm> mlp_norms;
+  torch::Tensor loc_x;
   int window = 1;
   std::array<float, kG> mean{}, inv_std{};
   float scale = 1, offset = 0;
@@ -474,6 +477,39 @@ TorchForceNet::TorchForceNet(const v1::DecoderModel& m) : impl_(new Impl) {
   impl_->scale = f.output_scale_n();
   impl_->offset = f.output_offset_n();
   impl_->x = torch::empty({1, impl_->window, kG});
+  for (const auto& ln : m.location()) {
+    std::vector<int> widths;
+    for (int k = 0; k < 3; ++k) widths.push_back(static_cast<int>(ln.dense(k).weight().shape(0)));
+    Mlp mlp(widths, static_cast<int>(ln.grid().ny() * ln.grid().nr()), 0.0);
+    int k = 0;
+    for (auto* lin : {&mlp->l1, &mlp->l2, &mlp->l3, &mlp->out}) {
+      load((*lin)->weight, ln.dense(k).weight());
+      load((*lin)->bias, ln.dense(k).bias());
+      ++k;
+    }
+    mlp->eval();
+    Norm nm;
+    for (int i = 0; i < kG; ++i) {
+      nm.mean[static_cast<std::size_t>(i)] = ln.input().mean(i);
+      nm.std[static_cast<std::size_t>(i)] = ln.input().std(i);
+    }
+    impl_->mlps.push_back(mlp);
+    impl_->mlp_norms.push_back(nm);
+  }
+  impl_->loc_x = torch::empty({1, kG});
+}
+
+void TorchForceNet::Locate(const float* s, std::vector<float>& out) {
+  torch::NoGradGuard no_grad;
+  out.clear();
+  for (std::size_t g = 0; g < impl_->mlps.size(); ++g) {
+    float* d = impl_->loc_x.data_ptr<float>();
+    for (std::size_t i = 0; i < static_cast<std::size_t>(kG); ++i) {
+      d[i] = (s[i] - impl_->mlp_norms[g].mean[i]) / impl_->mlp_norms[g].std[i];
+    }
+    const auto p = torch::softmax(impl_->mlps[g]->forward(impl_->loc_x), 1).contiguous();
+    out.insert(out.end(), p.data_ptr<float>(), p.data_ptr<float>() + p.numel());
+  }
 }
 
 TorchForceNet::~TorchForceNet() { delete impl_; }

@@ -62,6 +62,15 @@ struct Predictions {
 Predictions RunDecoder(FrameDecoder& decoder, const Prepared& data, const std::vector<std::int32_t>& test_ids,
                        const std::function<void(std::uint64_t, std::uint64_t)>& progress = {});
 
+struct Latency {
+  double p50_us = 0, p99_us = 0, mean_us = 0;
+  std::size_t frames = 0;
+};
+// Times Decode() frame by frame (single thread, steady clock) over up to max_frames test frames, in stream
+// order with the same resets as RunDecoder.
+Latency MeasureLatency(FrameDecoder& decoder, const Prepared& data, const std::vector<std::int32_t>& test_ids,
+                       std::size_t max_frames);
+
 struct BinStats {
   double lo, hi;
   stats::Summary error;
