@@ -114,7 +114,7 @@ void RegisterBench(CLI::App& app) {
       Row r;
       r.config = name;
       r.latency = eval::MeasureLatency(dec, p, test, a->frames);
-      const auto ev = eval::Evaluate(p, eval::RunDecoder(dec, p, test), spec);
+      const auto ev = eval::Evaluate(p, eval::RunDecoder(dec, p, test, {}, /*test_only=*/true), spec);
       r.force_mn = ev.force_error_mn.median;
       r.location_mm = ev.location_error_mm.median;
       r.missed = ev.location_missed;

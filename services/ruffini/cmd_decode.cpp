@@ -116,7 +116,7 @@ void RegisterEvaluate(CLI::App& app) {
     spdlog::info("fitting the inversion decoder's response map on the training part");
     const decode::InversionDecoder inv(eval::FitResponse(p, spec, test));
     eval::InversionFrameDecoder inv_dec(inv);
-    const auto inv_pred = eval::RunDecoder(inv_dec, p, test);
+    const auto inv_pred = eval::RunDecoder(inv_dec, p, test, {}, /*test_only=*/true);
     const auto inv_ev = eval::Evaluate(p, inv_pred, spec);
     char buf[1024];
     std::snprintf(buf, sizeof buf,

@@ -62,7 +62,7 @@ decode::ResponseModel FitResponse(const Prepared& p, const patch::PatchSpec& spe
 }
 
 Predictions RunDecoder(FrameDecoder& dec, const Prepared& p, const std::vector<std::int32_t>& test_ids,
-                       const std::function<void(std::uint64_t, std::uint64_t)>& progress) {
+                       const std::function<void(std::uint64_t, std::uint64_t)>& progress, bool test_only) {
   Predictions out;
   const std::size_t n = p.size();
   out.force_n.assign(n, static_cast<float>(kNaN));
@@ -73,15 +73,18 @@ Predictions RunDecoder(FrameDecoder& dec, const Prepared& p, const std::vector<s
   out.test.assign(n, 0);
   const std::set<std::int32_t> test(test_ids.begin(), test_ids.end());
   std::int32_t current = -2;
+  bool in_test = false;
   for (std::size_t k = 0; k < n; ++k) {
     if (p.indentation[k] != current) {
       current = p.indentation[k];
-      dec.Reset(&p.shift_pm[k]);
+      in_test = current >= 0 && test.count(current);
+      if (!test_only || in_test) dec.Reset(&p.shift_pm[k]);
     }
+    out.test[k] = in_test ? 1 : 0;
+    if (test_only && !in_test) continue;
     const decode::DecodeOutput o = dec.Decode(p.shift_pm[k]);
     out.valid[k] = o.valid ? 1 : 0;
     out.located[k] = o.located ? 1 : 0;
-    out.test[k] = (current >= 0 && test.count(current)) ? 1 : 0;
     if (o.valid) out.force_n[k] = o.force_n;
     if (o.located) {
       out.y_mm[k] = o.y_mm;

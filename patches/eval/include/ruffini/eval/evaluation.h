@@ -58,9 +58,10 @@ struct Predictions {
   std::vector<std::uint8_t> valid, located, test;
 };
 
-// Decodes every frame; each indentation starts from a reset window filled with its first frame.
+// Decodes every frame (or, with test_only, only the test indentations' frames; the others stay NaN/0);
+// each indentation starts from a reset window filled with its first frame.
 Predictions RunDecoder(FrameDecoder& decoder, const Prepared& data, const std::vector<std::int32_t>& test_ids,
-                       const std::function<void(std::uint64_t, std::uint64_t)>& progress = {});
+                       const std::function<void(std::uint64_t, std::uint64_t)>& progress = {}, bool test_only = false);
 
 struct Latency {
   double p50_us = 0, p99_us = 0, mean_us = 0;
