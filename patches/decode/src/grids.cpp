@@ -1,6 +1,7 @@
 #include "ruffini/decode/grids.h"
 
 #include <algorithm>
+#include <stdexcept>
 #include <cmath>
 #include <numbers>
 
@@ -45,44 +46,74 @@ Nip::Nip(std::span<const GridSpec> grids) : grids_(grids.size()) {
       std::size_t offset = 0;
       for (const auto& g : grids) {
         const int k = g.ClassOf(y, r);
-        parent_.push_back(k < 0 ? -1 : static_cast<std::int32_t>(offset + static_cast<std::size_t>(k)));
+        parent_.push_back(static_cast<std::int32_t>(k < 0 ? std::size_t{0} : offset + static_cast<std::size_t>(k)));
+        if (k < 0) none_.push_back(parent_.size() - 1);
         offset += static_cast<std::size_t>(g.classes());
       }
     }
   }
+  // A missing parent reads index `inputs_`: Weights() sees it as probability 0 (no branch per lookup).
+  for (std::size_t k : none_) parent_[k] = static_cast<std::int32_t>(inputs_);
+  none_.clear();
+  if (centre_y_.size() > kMaxFineCells) throw std::length_error("NIP fine grid larger than kMaxFineCells");
+}
+
+void Nip::Weights(std::span<const float> p, float* w) const noexcept {
+  const std::size_t cells = centre_y_.size();
+  const std::int32_t* par = parent_.data();
+  for (std::size_t c = 0; c < cells; ++c) {
+    float acc = 0.0f;
+    for (std::size_t g = 0; g < grids_; ++g) {
+      const auto k = static_cast<std::size_t>(par[c * grids_ + g]);
+      acc += k < inputs_ ? p[k] : 0.0f;
+    }
+    w[c] = acc;
+  }
+}
+
+Nip::Estimate Nip::Fuse(std::span<const float> p, double radius_mm) const noexcept {
+  std::array<float, kMaxFineCells> w;
+  Weights(p, w.data());
+  Estimate e;
+  double sw = 0, sy = 0, sr = 0, best = 0;
+  for (std::size_t c = 0; c < centre_y_.size(); ++c) {
+    sw += w[c];
+    sy += w[c] * centre_y_[c];
+    sr += w[c] * centre_r_[c];
+    best = std::max(best, static_cast<double>(w[c]));
+  }
+  if (!(sw > 0)) return e;
+  e.ok = true;
+  e.y_mm = sy / sw;
+  e.r_deg = sr / sw;
+  e.confidence = best / static_cast<double>(grids_);
+  const double mm_per_deg = radius_mm * std::numbers::pi / 180.0;
+  double s2 = 0;
+  for (std::size_t c = 0; c < centre_y_.size(); ++c) {
+    const double dy = centre_y_[c] - e.y_mm, da = (centre_r_[c] - e.r_deg) * mm_per_deg;
+    s2 += w[c] * (dy * dy + da * da);
+  }
+  e.spread_mm = std::sqrt(s2 / sw);
+  return e;
 }
 
 double Nip::Locate(std::span<const float> p, double& y_mm, double& r_deg) const noexcept {
-  double sw = 0, sy = 0, sr = 0, best = 0;
-  for (std::size_t c = 0; c < centre_y_.size(); ++c) {
-    double w = 0;
-    for (std::size_t g = 0; g < grids_; ++g) {
-      const std::int32_t k = parent_[c * grids_ + g];
-      if (k >= 0) w += p[static_cast<std::size_t>(k)];
-    }
-    sw += w;
-    sy += w * centre_y_[c];
-    sr += w * centre_r_[c];
-    best = std::max(best, w);
-  }
-  if (!(sw > 0)) return 0.0;  // y, r untouched
-  y_mm = sy / sw;
-  r_deg = sr / sw;
-  return best / static_cast<double>(grids_);
+  const Estimate e = Fuse(p, 1.0);
+  if (!e.ok) return 0.0;
+  y_mm = e.y_mm;
+  r_deg = e.r_deg;
+  return e.confidence;
 }
 
 double Nip::Spread(std::span<const float> p, double y_mm, double r_deg, double radius_mm) const noexcept {
+  std::array<float, kMaxFineCells> w;
+  Weights(p, w.data());
   const double mm_per_deg = radius_mm * std::numbers::pi / 180.0;
   double sw = 0, s2 = 0;
   for (std::size_t c = 0; c < centre_y_.size(); ++c) {
-    double w = 0;
-    for (std::size_t g = 0; g < grids_; ++g) {
-      const std::int32_t k = parent_[c * grids_ + g];
-      if (k >= 0) w += p[static_cast<std::size_t>(k)];
-    }
     const double dy = centre_y_[c] - y_mm, da = (centre_r_[c] - r_deg) * mm_per_deg;
-    sw += w;
-    s2 += w * (dy * dy + da * da);
+    sw += w[c];
+    s2 += w[c] * (dy * dy + da * da);
   }
   return sw > 0 ? std::sqrt(s2 / sw) : 0.0;
 }

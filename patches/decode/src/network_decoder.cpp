@@ -224,12 +224,12 @@ DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) cons
   out.in_contact = d.gate;
   if (!d.gate) return out;
   RunLocation(raw, d);
-  double y = 0, r = 0;
-  out.confidence = static_cast<float>(nip_->Locate(d.probabilities, y, r));
-  out.location_sigma_mm = static_cast<float>(nip_->Spread(d.probabilities, y, r, radius_mm_));
-  out.y_mm = static_cast<float>(y);
-  out.r_deg = static_cast<float>(r);
-  out.located = true;
+  const Nip::Estimate e = nip_->Fuse(d.probabilities, radius_mm_);
+  out.confidence = static_cast<float>(e.confidence);
+  out.location_sigma_mm = static_cast<float>(e.spread_mm);
+  out.y_mm = static_cast<float>(e.y_mm);
+  out.r_deg = static_cast<float>(e.r_deg);
+  out.located = e.ok;
   return out;
 }
 

@@ -35,18 +35,30 @@ std::array<GridSpec, 4> PaperGrids(const patch::Region& indented_area);
 class Nip {
  public:
   explicit Nip(std::span<const GridSpec> grids);
-  // probabilities: each grid's softmax, concatenated in grid order. Writes the barycentre and returns the
-  // largest fine-cell weight divided by the number of grids (a confidence in 0..1). Real-time safe.
+  static constexpr std::size_t kMaxFineCells = 1024;
+  struct Estimate {
+    double y_mm = 0, r_deg = 0;
+    double confidence = 0;  // largest fine-cell weight / grids, 0..1
+    double spread_mm = 0;   // weighted RMS distance of the fine cells from the estimate, on the surface
+    bool ok = false;        // false when every weight is 0 (nothing to locate)
+  };
+  // probabilities: each grid's softmax, concatenated in grid order. One pass fuses the weights; a second
+  // takes the spread. Real-time safe.
+  Estimate Fuse(std::span<const float> probabilities, double surface_radius_mm) const noexcept;
+  // The barycentre alone (writes y, r when any weight is positive); returns the confidence.
   double Locate(std::span<const float> probabilities, double& y_mm, double& r_deg) const noexcept;
-  // Spread of the weights around the barycentre (weighted RMS distance, in mm on the surface; radius given).
+  // Spread of the weights around a point (weighted RMS distance, in mm on the surface; radius given).
   double Spread(std::span<const float> probabilities, double y_mm, double r_deg, double surface_radius_mm) const noexcept;
   [[nodiscard]] std::size_t fine_cells() const { return centre_y_.size(); }
   [[nodiscard]] std::size_t inputs() const { return inputs_; }
 
  private:
   std::vector<double> centre_y_, centre_r_;
-  std::vector<std::int32_t> parent_;  // fine_cells x grids, index into the concatenated probabilities
+  std::vector<std::int32_t> parent_;  // fine_cells x grids, index into the probabilities; `inputs_` = none
+  // Weights of every fine cell (no parent counts as probability 0).
+  void Weights(std::span<const float> p, float* w) const noexcept;
   std::size_t grids_ = 0, inputs_ = 0;
+  std::vector<std::size_t> none_;  // construction scratch
 };
 
 }  // namespace ruffini::decode
