@@ -171,7 +171,13 @@ void RegisterBench(CLI::App& app) {
     std::filesystem::create_directories(a->out);
     const auto dir = std::filesystem::path(a->out);
     std::ofstream out((dir / "bench.md").string());
-    out << "# Speed / accuracy of the decoders\n\nSingle thread, per frame, " << a->frames << " test frames timed per configuration; errors over the whole test set of `" << a->data << "`.\n\n" << md.str()
+    std::string command = "ruffini bench";
+    for (const auto& mp : a->models) command += " --model " + mp;
+    command += " --data " + a->data + " --out " + a->out + " --frames " + std::to_string(a->frames);
+    out << "# Speed / accuracy of the decoders\n\nReproduce: `" << command << "`\n\nSingle thread, per frame, " << a->frames
+        << " test frames timed per configuration (steady clock around each Decode call); errors over the whole test set "
+           "(the models' held-out indentations). Location error is over the above-gate frames a decoder located; the last "
+           "column counts those it did not.\n\n" << md.str()
         << "\n![Pareto](pareto.svg)\n";
     if (!out) throw InputError((dir / "bench.md").string() + ": cannot write");
     plot::Figure fig("Speed vs location accuracy (test set)", "p50 latency per frame (us)", "location error median (mm)", 760, 480);

@@ -61,6 +61,9 @@ void RegisterTrain(CLI::App& app) {
         bar = std::make_unique<ProgressBar>(phase + " epochs", static_cast<std::uint64_t>(epochs));
         phase_shown = phase;
       }
+      char note[64];
+      std::snprintf(note, sizeof note, "epoch loss %.5f", loss);
+      bar->SetNote(note);
       bar->Update(static_cast<std::uint64_t>(e));
       spdlog::debug("{} epoch {}/{} loss {:.5f}", phase, e, epochs, loss);
       if (e == epochs) spdlog::info("{}: final epoch loss {:.5f}", phase, loss);

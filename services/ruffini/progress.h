@@ -59,6 +59,9 @@ class ProgressBar {
     Emit(Bar() + Stats(now), false);
   }
 
+  // A short note shown after the statistics on every line from now on (e.g. "loss 0.124").
+  void SetNote(std::string note) { note_ = std::move(note); }
+
   // Final line with elapsed time and mean rate. Idempotent; the destructor calls it.
   void Finish() {
     if (finished_ || out_ == nullptr) return;
@@ -67,6 +70,7 @@ class ProgressBar {
     std::string line = label_ + "  done: " + Count(static_cast<double>(done_)) +
                        (total_ ? "/" + Count(static_cast<double>(total_)) : "") + " in " + Elapsed(secs) + ", " +
                        Count(secs > 0.0 ? static_cast<double>(done_) / secs : 0.0, true) + "/s";
+    if (!note_.empty()) line += "  " + note_;
     Emit(line, true);
   }
 
@@ -93,9 +97,10 @@ class ProgressBar {
     const double rate = secs > 0.0 ? static_cast<double>(done_) / secs : 0.0;
     std::string s = "  " + Count(static_cast<double>(done_)) + (total_ ? "/" + Count(static_cast<double>(total_)) : "") +
                     "  " + Count(rate, true) + "/s";
-    if (!total_) return s + "  " + Elapsed(secs);
+    const std::string note = note_.empty() ? "" : "  " + note_;
+    if (!total_) return s + "  " + Elapsed(secs) + note;
     const double left = static_cast<double>(total_ - std::min(done_, total_));
-    return s + "  ETA " + (left == 0.0 ? "0:00" : rate > 0.0 ? Hms(left / rate) : "--:--");
+    return s + "  ETA " + (left == 0.0 ? "0:00" : rate > 0.0 ? Hms(left / rate) : "--:--") + note;
   }
   static std::string Count(double v, bool fractional = false) {
     static constexpr char kUnit[] = " kMGTPE";
@@ -131,6 +136,7 @@ class ProgressBar {
   }
 
   std::string label_;
+  std::string note_;
   std::uint64_t total_;
   std::FILE* out_;
   bool tty_;

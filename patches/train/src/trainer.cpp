@@ -22,13 +22,15 @@ struct ForceNetImpl : torch::nn::Module {
   explicit ForceNetImpl(int window) {
     for (int k = 0; k < 3; ++k) {
       convs.push_back(register_module("conv" + std::to_string(k),
-                                      torch::nn::Conv1d(torch::nn::Conv1dOptions(k == 0 ? window : 16, 16, 16).padding(torch::kSame))));
+                                      torch::nn::Conv1d(torch::nn::Conv1dOptions(k == 0 ? window : 16, 16, 16))));
     }
     fc1 = register_module("fc1", torch::nn::Linear(32, 100));
     fc2 = register_module("fc2", torch::nn::Linear(100, 1));
   }
   torch::Tensor forward(torch::Tensor x) {  // [N, W, 16]
-    for (auto& c : convs) x = torch::max_pool1d(torch::relu(c->forward(x)), 2);
+    // 'same' padding written out (7 zeros before, 8 after, as PyTorch's padding='same' does for kernel 16),
+    // which the runtime mirrors with pad_left = 7.
+    for (auto& c : convs) x = torch::max_pool1d(torch::relu(c->forward(torch::constant_pad_nd(x, {7, 8}))), 2);
     return fc2->forward(torch::relu(fc1->forward(x.flatten(1))));
   }
   std::vector<torch::nn::Conv1d> convs;
