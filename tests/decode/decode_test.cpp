@@ -350,3 +350,32 @@ TEST_F(ModelFileTest, ModelForAnotherPatchIsRejected) {
 
 }  // namespace
 }  // namespace ruffini::decode
+
+namespace ruffini::decode {
+namespace {
+
+// The model shipped in config/models/ loads, was trained for the shipped patch spec (a spec edit without
+// retraining fails here), and the runtime reproduces its golden vectors (libtorch's outputs) to 1e-5.
+TEST(ShippedModelTest, LoadsMatchesThePatchAndDecodesItsGoldenVectors) {
+  const auto m = LoadModel(RUFFINI_SOURCE_DIR "/config/models/forearm.rmodel");
+  EXPECT_NO_THROW(CheckModelMatchesPatch(m, Spec(), "config/models/forearm.rmodel"));
+  ASSERT_GE(m.golden_size(), 1);
+  NetworkDecoder<float> d(m);
+  NetworkDecoder<float>::Data a(d);
+  for (const auto& g : m.golden()) {
+    EXPECT_NEAR(d.ForceOnWindow(g.window_shift_pm().data(), a), g.force_n(), 1e-5 * std::max(1.0f, std::abs(g.force_n())));
+    ShiftsPm last{};
+    const int base = (static_cast<int>(m.force().window()) - 1) * 16;
+    for (int i = 0; i < 16; ++i) last[static_cast<std::size_t>(i)] = g.window_shift_pm(base + i);
+    std::vector<float> p;
+    d.Probabilities(last, a, p);
+    ASSERT_EQ(static_cast<int>(p.size()), g.probabilities_size());
+    for (std::size_t k = 0; k < p.size(); ++k) EXPECT_NEAR(p[k], g.probabilities(static_cast<int>(k)), 1e-5);
+    const auto o = d.Decode(last, a);
+    EXPECT_TRUE(o.valid);
+  }
+  EXPECT_EQ(m.training().folds_size(), 5 * 6);
+}
+
+}  // namespace
+}  // namespace ruffini::decode
