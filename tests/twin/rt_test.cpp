@@ -1,25 +1,9 @@
 // The per-frame path allocates nothing: a counting global operator new, armed around the calls.
 #include <gtest/gtest.h>
 
-#include <atomic>
-#include <cstdlib>
-#include <new>
-
+#include "../common/alloc_counter.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
-
-namespace {
-std::atomic<bool> g_armed{false};
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-void* operator new(std::size_t n) {
-  if (g_armed.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace ruffini::twin {
 namespace {
@@ -35,21 +19,18 @@ TEST(RealTime, StrainShiftsAndInterrogatorReadDoNotAllocate) {
   Shifts s;
   std::array<double, 16> wl{};
   std::uint32_t flags = 0;
-  g_allocations = 0;
-  g_armed = true;
-  for (int k = 0; k < 10000; ++k) {
-    contacts[0].at.y_mm = 20.0 + (k % 100);
-    twin.StrainShiftsPm(contacts, s, flags);
-    sim.Read(k * 0.01, s, wl, flags);
-  }
-  g_armed = false;
-  EXPECT_EQ(g_allocations.load(), 0);
+  EXPECT_EQ(testing::CountAllocations([&] {
+              for (int k = 0; k < 10000; ++k) {
+                contacts[0].at.y_mm = 20.0 + (k % 100);
+                twin.StrainShiftsPm(contacts, s, flags);
+                sim.Read(k * 0.01, s, wl, flags);
+              }
+            }),
+            0);
   // The counter does count: an allocation while armed is seen.
-  g_armed = true;
-  auto* leak_check = new int(3);
-  g_armed = false;
-  delete leak_check;
-  EXPECT_EQ(g_allocations.load(), 1);
+  int* seen = nullptr;
+  EXPECT_EQ(testing::CountAllocations([&] { seen = new int(3); }), 1);
+  delete seen;
 }
 
 }  // namespace
