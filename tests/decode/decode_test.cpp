@@ -371,8 +371,10 @@ TEST(ShippedModelTest, LoadsMatchesThePatchAndDecodesItsGoldenVectors) {
     d.Probabilities(last, a, p);
     ASSERT_EQ(static_cast<int>(p.size()), g.probabilities_size());
     for (std::size_t k = 0; k < p.size(); ++k) EXPECT_NEAR(p[k], g.probabilities(static_cast<int>(k)), 1e-5);
+    d.Reset(a, &last);  // a window of W frames of history
     const auto o = d.Decode(last, a);
     EXPECT_TRUE(o.valid);
+    EXPECT_TRUE(std::isfinite(o.force_n));
   }
   EXPECT_EQ(m.training().folds_size(), 5 * 6);
 }
