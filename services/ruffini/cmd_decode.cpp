@@ -97,7 +97,7 @@ void RegisterEvaluate(CLI::App& app) {
       ->required()->check(CLI::ExistingFile);
   cmd->add_option("--report", a->report, "Report folder (report.md, pictures, predictions.h5)")->required();
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
-  cmd->callback([a, cmd]() {
+  cmd->callback([a]() {
     const patch::PatchSpec spec = patch::LoadPatchSpec(a->patch_spec);
     const v1::DecoderModel m = decode::LoadModel(a->model);
     decode::CheckModelMatchesPatch(m, spec, a->model);
@@ -124,7 +124,7 @@ void RegisterEvaluate(CLI::App& app) {
     char buf[1024];
     std::snprintf(buf, sizeof buf,
                   "## Beyond the paper: physics-informed inversion\n\n"
-                  "A per-grating response map learned from the training part (3 mm x 3 deg nodes, shift = F (1 + %.3f F) g(Y, R)) "
+                  "A per-grating response map learned from the training part (kernel regression of per-indentation sensitivities on 1.5 mm nodes, shift = F (1 + %.3f F) g(Y, R)) "
                   "inverted per frame by Levenberg-Marquardt (10 iterations after a coarse search). Same test set:\n\n"
                   "| decoder | force median (IQR), mN | location median (IQR), mm | above-gate frames not located |\n|---|---|---|---|\n"
                   "| paper networks (W = %u, NIP union) | %.1f (%.1f) | %.2f (%.2f) | %zu |\n"
@@ -142,7 +142,6 @@ void RegisterEvaluate(CLI::App& app) {
     std::printf("test set: force %.1f mN (IQR %.1f), location %.2f mm (IQR %.2f); report in %s/report.md\n",
                 ev.force_error_mn.median, ev.force_error_mn.iqr(), ev.location_error_mm.median, ev.location_error_mm.iqr(),
                 a->report.c_str());
-    (void)cmd;
   });
 }
 

@@ -69,12 +69,10 @@ TEST(GridsTest, NipPutsAOneHotContactAtTheSharedFineCell) {
   EXPECT_NEAR(conf, 1.0, 1e-9);
   // The fused weight also covers the neighbouring fine cells of each one-hot cell: a spread of a few mm,
   // far below that of uninformative (uniform) probabilities.
-  const double sharp = nip.Spread(p, ey, er, 37.4);
+  const double sharp = nip.Fuse(p, 37.4).spread_mm;
   std::vector<float> flat(nip.inputs(), 0.03f);
-  double fy = 0, fr = 0;
-  nip.Locate(flat, fy, fr);
   EXPECT_GT(sharp, 1.0);
-  EXPECT_LT(sharp, 0.5 * nip.Spread(flat, fy, fr, 37.4));
+  EXPECT_LT(sharp, 0.5 * nip.Fuse(flat, 37.4).spread_mm);
   // All zero: no estimate, confidence 0, inputs untouched.
   std::fill(p.begin(), p.end(), 0.0f);
   ey = -1;

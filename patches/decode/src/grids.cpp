@@ -105,17 +105,4 @@ double Nip::Locate(std::span<const float> p, double& y_mm, double& r_deg) const 
   return e.confidence;
 }
 
-double Nip::Spread(std::span<const float> p, double y_mm, double r_deg, double radius_mm) const noexcept {
-  std::array<float, kMaxFineCells> w;
-  Weights(p, w.data());
-  const double mm_per_deg = radius_mm * std::numbers::pi / 180.0;
-  double sw = 0, s2 = 0;
-  for (std::size_t c = 0; c < centre_y_.size(); ++c) {
-    const double dy = centre_y_[c] - y_mm, da = (centre_r_[c] - r_deg) * mm_per_deg;
-    sw += w[c];
-    s2 += w[c] * (dy * dy + da * da);
-  }
-  return sw > 0 ? std::sqrt(s2 / sw) : 0.0;
-}
-
 }  // namespace ruffini::decode

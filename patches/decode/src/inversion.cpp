@@ -55,10 +55,9 @@ ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vect
             best_b = bi;
           }
         }
-        site.curvature = best != 0 ? best_b / best : 0.0;
-        if (std::abs(best) > 5.0) sites.push_back(site);  // a clear signal
-        else site.curvature = 0.0;
-        if (std::abs(best) <= 5.0) sites.push_back(Site{site.y, site.r, site.g, std::nan("")});
+        // Curvature only where the signal is clear (> 5 pm/N on some grating); the sensitivities always count.
+        site.curvature = std::abs(best) > 5.0 ? best_b / best : std::nan("");
+        sites.push_back(site);
       }
     }
     k = e;

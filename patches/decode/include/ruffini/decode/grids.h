@@ -47,8 +47,6 @@ class Nip {
   Estimate Fuse(std::span<const float> probabilities, double surface_radius_mm) const noexcept;
   // The barycentre alone (writes y, r when any weight is positive); returns the confidence.
   double Locate(std::span<const float> probabilities, double& y_mm, double& r_deg) const noexcept;
-  // Spread of the weights around a point (weighted RMS distance, in mm on the surface; radius given).
-  double Spread(std::span<const float> probabilities, double y_mm, double r_deg, double surface_radius_mm) const noexcept;
   [[nodiscard]] std::size_t fine_cells() const { return centre_y_.size(); }
   [[nodiscard]] std::size_t inputs() const { return inputs_; }
 
