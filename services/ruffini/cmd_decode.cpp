@@ -41,6 +41,16 @@ void RegisterTrain(CLI::App& app) {
   cmd->add_option("--lr-location", a->o.lr_location, "Learning rate of the location nets")->capture_default_str();
   cmd->add_option("--optimizer", a->o.optimizer, "sgd (momentum 0.9, the paper's) | adam")
       ->check(CLI::IsMember({"sgd", "adam"}))->capture_default_str();
+  cmd->add_option("--force-loss", a->o.force_loss, "Force net loss: mse (the paper's) | l1 (targets the median error) | huber")
+      ->check(CLI::IsMember({"mse", "l1", "huber"}))->capture_default_str();
+  cmd->add_option("--location-input", a->o.location_input,
+                  "What the location MLPs see: raw shifts (the paper's) | unit (shifts over their norm: the pattern only)")
+      ->check(CLI::IsMember({"raw", "unit"}))->capture_default_str();
+  cmd->add_option("--label-sigma-mm", a->o.label_sigma_mm,
+                  "Location labels: 0 = one cell (the paper's); > 0 = each cell's share of a Gaussian of this sigma")
+      ->check(CLI::Range(0.0, 100.0))->capture_default_str();
+  cmd->add_option("--unit-floor-pm", a->o.unit_floor_pm, "unit: norms below this (pm) are taken as this")
+      ->check(CLI::Range(1e-3, 1e3))->capture_default_str();
   cmd->add_option("--folds", a->o.folds, "Cross-validation folds inside the training part (0 = none)")->check(CLI::Range(0, 20))->capture_default_str();
   cmd->add_option("--seed", a->o.seed, "Seed (split, initialisation, sampling)")->capture_default_str();
   cmd->add_option("--threads", a->o.threads, "Threads")->check(CLI::Range(1, 64))->capture_default_str();

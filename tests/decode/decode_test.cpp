@@ -150,8 +150,15 @@ TEST(DecoderTest, KnownForceFunction) {
 }
 
 TEST(DecoderTest, AllZeroAndHugeInputsStayFinite) {
-  for (int window : {1, 8}) {
-    const auto m = testing::SyntheticModel(Spec(), window, 1.0f);
+  for (int window : {1, 8, -8}) {  // -8: W = 8 with unit-pattern location input (norm 0 and norm ~2e4 pm)
+    auto m = testing::SyntheticModel(Spec(), std::abs(window), 1.0f);
+    if (window < 0) {
+      for (auto& l : *m.mutable_location()) {
+        l.set_input_kind(v1::LocationNet::UNIT);
+        l.set_unit_floor_pm(1.0f);
+      }
+    }
+    window = std::abs(window);
     NetworkDecoder<float> d(m);
     NetworkDecoder<double> dd(m);
     NetworkDecoder<float>::Data a(d);
@@ -331,6 +338,13 @@ TEST_F(ModelFileTest, ShapeMismatchesAreRejected) {
   m.mutable_force()->mutable_input()->set_std(3, 0.0f);
   SaveModel(path, m);
   EXPECT_NE(Error().find("force net normalisation entry 3 has std 0"), std::string::npos) << Error();
+  m = testing::SyntheticModel(Spec());
+  m.mutable_location(1)->set_input_kind(v1::LocationNet::UNIT);
+  SaveModel(path, m);
+  EXPECT_NE(Error().find("location net VSG has UNIT input with unit_floor_pm 0"), std::string::npos) << Error();
+  m.mutable_location(1)->set_input_kind(static_cast<v1::LocationNet::Input>(7));
+  SaveModel(path, m);
+  EXPECT_NE(Error().find("location net VSG has an unknown input kind 7"), std::string::npos) << Error();
 }
 
 TEST_F(ModelFileTest, ModelForAnotherPatchIsRejected) {

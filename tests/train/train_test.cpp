@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <limits>
 
 #include "ruffini/decode/model_io.h"
 #include "ruffini/decode/network_decoder.h"
@@ -18,7 +19,8 @@ namespace {
 struct Fixture {
   twin::Scene scene = twin::LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
   eval::Prepared prepared;
-  std::array<v1::DecoderModel, 2> models;  // W = 1 and W = 8
+  // W = 1; W = 8; W = 8 with the L1 force loss, unit-pattern location input and soft labels (the variants).
+  std::array<v1::DecoderModel, 3> models;
   Fixture() {
     const twin::SkinTwin t(scene.Patch().spec, scene.effects, {scene.probe.radius_mm});
     dataset::Dataset d;
@@ -29,9 +31,14 @@ struct Fixture {
       for (const auto& x : f) d.Append(x);
     });
     prepared = eval::PrepareFrames(d);
-    for (int k = 0; k < 2; ++k) {
+    for (int k = 0; k < 3; ++k) {
       TrainOptions o;
       o.window = k == 0 ? 1 : 8;
+      if (k == 2) {
+        o.force_loss = "l1";
+        o.location_input = "unit";
+        o.label_sigma_mm = 5.0;
+      }
       o.mlp_widths = {16, 16, 16};
       o.epochs_force = o.epochs_location = 2;
       o.frames_per_epoch = 4096;
@@ -98,6 +105,67 @@ TEST(TrainTest, TorchEagerForwardEqualsRuntime) {
   }
 }
 
+TEST(TrainTest, VariantKnobsAreRecorded) {
+  EXPECT_EQ(F().models[0].training().force_loss(), "mse");
+  EXPECT_EQ(F().models[2].training().force_loss(), "l1");
+  EXPECT_FLOAT_EQ(F().models[0].training().location_label_sigma_mm(), 0.0f);
+  EXPECT_FLOAT_EQ(F().models[2].training().location_label_sigma_mm(), 5.0f);
+  for (const auto& l : F().models[0].location()) EXPECT_EQ(l.input_kind(), v1::LocationNet::RAW);
+  for (const auto& l : F().models[2].location()) {
+    EXPECT_EQ(l.input_kind(), v1::LocationNet::UNIT);
+    EXPECT_FLOAT_EQ(l.unit_floor_pm(), 1.0f);
+  }
+}
+
+// libtorch eager location (with its own unit scaling) and the runtime agree, for both input kinds.
+TEST(TrainTest, TorchEagerLocateEqualsRuntime) {
+  for (const auto& m : F().models) {
+    TorchForceNet torch_net(m);
+    decode::NetworkDecoder<float> d(m);
+    decode::NetworkDecoder<float>::Data a(d);
+    for (const auto& g : m.golden()) {
+      decode::ShiftsPm last{};
+      const int base = (static_cast<int>(m.force().window()) - 1) * 16;
+      for (int i = 0; i < 16; ++i) last[static_cast<std::size_t>(i)] = g.window_shift_pm(base + i);
+      std::vector<float> pt, pr;
+      torch_net.Locate(last.data(), pt);
+      d.Probabilities(last, a, pr);
+      ASSERT_EQ(pt.size(), pr.size());
+      for (std::size_t k = 0; k < pt.size(); ++k) EXPECT_NEAR(pt[k], pr[k], 1e-5);
+    }
+  }
+}
+
+// Unit input sees only the pattern: scaling every shift by 3 leaves the location probabilities unchanged
+// (the raw-input nets change); a missing grating still gives finite probabilities.
+TEST(TrainTest, UnitInputIsScaleInvariant) {
+  for (std::size_t k : {0u, 2u}) {
+    const auto& m = F().models[k];
+    decode::NetworkDecoder<float> d(m);
+    decode::NetworkDecoder<float>::Data a(d);
+    const auto& g = m.golden(0);
+    decode::ShiftsPm s{}, s3{};
+    const int base = (static_cast<int>(m.force().window()) - 1) * 16;
+    for (int i = 0; i < 16; ++i) {
+      s[static_cast<std::size_t>(i)] = g.window_shift_pm(base + i);
+      s3[static_cast<std::size_t>(i)] = 3.0f * g.window_shift_pm(base + i);
+    }
+    std::vector<float> p1, p3;
+    d.Probabilities(s, a, p1);
+    d.Probabilities(s3, a, p3);
+    double diff = 0;
+    for (std::size_t j = 0; j < p1.size(); ++j) diff = std::max(diff, static_cast<double>(std::abs(p1[j] - p3[j])));
+    if (k == 2) {
+      EXPECT_LT(diff, 1e-5);
+    } else {
+      EXPECT_GT(diff, 1e-4);
+    }
+    s[5] = std::numeric_limits<float>::quiet_NaN();
+    d.Probabilities(s, a, p1);
+    for (float v : p1) EXPECT_TRUE(std::isfinite(v));
+  }
+}
+
 TEST(TrainTest, SaveLoadRoundTrip) {
   const auto path = std::filesystem::temp_directory_path() / "ruffini_train_test.rmodel";
   decode::SaveModel(path.string(), F().models[0]);
@@ -122,6 +190,18 @@ TEST(TrainTest, SameSeedSameModel) {
 TEST(TrainTest, RejectsBadOptions) {
   TrainOptions o;
   o.mlp_widths = {8, 8};
+  EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
+  o.mlp_widths = {8, 8, 8};
+  o.force_loss = "l2";
+  EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
+  o.force_loss = "mse";
+  o.location_input = "normalised";
+  EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
+  o.location_input = "unit";
+  o.unit_floor_pm = 0.0;
+  EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
+  o.unit_floor_pm = 1.0;
+  o.label_sigma_mm = -1.0;
   EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
 }
 

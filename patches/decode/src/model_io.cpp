@@ -115,6 +115,13 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
         throw InputError(name + " has an empty grid");
       }
       CheckNorm(l.input(), 16, name);
+      if (l.input_kind() != v1::LocationNet::RAW && l.input_kind() != v1::LocationNet::UNIT) {
+        throw InputError(name + " has an unknown input kind " + std::to_string(static_cast<int>(l.input_kind())) +
+                         " (a newer ruffini wrote it?)");
+      }
+      if (l.input_kind() == v1::LocationNet::UNIT && !(std::isfinite(l.unit_floor_pm()) && l.unit_floor_pm() > 0.0f)) {
+        throw InputError(name + " has UNIT input with unit_floor_pm " + std::to_string(l.unit_floor_pm()) + " (must be > 0)");
+      }
       const std::size_t classes = static_cast<std::size_t>(l.grid().ny()) * l.grid().nr();
       if (CheckDense(l.dense(), 16, name) != classes) {
         throw InputError(name + " outputs do not match its grid's " + std::to_string(classes) + " cells");

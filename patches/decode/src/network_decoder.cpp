@@ -82,6 +82,9 @@ NetworkDecoder<Scalar>::NetworkDecoder(const v1::DecoderModel& m, DecoderOptions
       mlp.inv_std[static_cast<std::size_t>(i)] = static_cast<Scalar>(1.0 / ln.input().std(i));
     }
     for (const auto& d : ln.dense()) mlp.layers.push_back(dense(d));
+    mlp.unit = ln.input_kind() == v1::LocationNet::UNIT;
+    mlp.unit_floor = static_cast<Scalar>(mlp.unit ? ln.unit_floor_pm() : 1.0f);
+    if (!(mlp.unit_floor > 0)) throw InputError("location net " + ln.grid().name() + ": unit_floor_pm must be > 0");
     location_.push_back(std::move(mlp));
     const auto& g = ln.grid();
     grids.push_back(GridSpec{g.name(), g.y0_mm(), g.r0_deg(), g.cell_y_mm(), g.cell_r_deg(), static_cast<int>(g.ny()),
@@ -161,11 +164,25 @@ float NetworkDecoder<Scalar>::ForceOnWindow(const float* w, Data& d) const noexc
 }
 
 template <typename Scalar>
-void NetworkDecoder<Scalar>::RunLocation(const std::array<Scalar, 16>& raw, Data& d) const noexcept {
+void NetworkDecoder<Scalar>::RunLocation(const std::array<Scalar, 16>& raw, const std::array<bool, 16>& present,
+                                          Data& d) const noexcept {
+  // The norm of the present gratings' shifts, for nets that see the unit pattern. Shifts are clamped to
+  // +-1e6 pm first so the sum of squares stays finite in float.
+  Scalar norm2 = 0;
+  for (std::size_t i = 0; i < 16; ++i) {
+    if (!present[i]) continue;
+    const Scalar v = std::clamp(raw[i], Scalar(-1e6), Scalar(1e6));
+    norm2 += v * v;
+  }
+  const Scalar norm = std::sqrt(norm2);
   std::size_t offset = 0;
   for (const Mlp& m : location_) {
     Vector& in = d.loc[2];
-    for (std::size_t i = 0; i < 16; ++i) in[static_cast<Eigen::Index>(i)] = ZScore(raw[i], m.mean[i], m.inv_std[i]);
+    const Scalar scale = m.unit ? Scalar(1) / std::max(norm, m.unit_floor) : Scalar(1);
+    for (std::size_t i = 0; i < 16; ++i) {
+      // A missing grating is z = 0 (no information), as in training.
+      in[static_cast<Eigen::Index>(i)] = present[i] ? ZScore(raw[i] * scale, m.mean[i], m.inv_std[i]) : Scalar(0);
+    }
     const Vector* x = &in;
     Eigen::Index n = 16;
     for (std::size_t k = 0; k < m.layers.size(); ++k) {
@@ -194,9 +211,11 @@ DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) cons
   DecodeOutput out;
   // Missing peaks (NaN/Inf) take the training mean: they carry no information, and z = 0 says so.
   std::array<Scalar, 16> raw{};
+  std::array<bool, 16> present{};
   int missing = 0;
   for (std::size_t i = 0; i < 16; ++i) {
-    if (std::isfinite(shift[i])) {
+    present[i] = std::isfinite(shift[i]);
+    if (present[i]) {
       raw[i] = static_cast<Scalar>(shift[i]);
     } else {
       raw[i] = f_mean_[i];
@@ -223,7 +242,7 @@ DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) cons
   d.gate = d.gate ? out.force_n > gate_off_n_ : out.force_n > gate_on_n_;
   out.in_contact = d.gate;
   if (!d.gate) return out;
-  RunLocation(raw, d);
+  RunLocation(raw, present, d);
   const Nip::Estimate e = nip_->Fuse(d.probabilities, radius_mm_);
   out.confidence = static_cast<float>(e.confidence);
   out.location_sigma_mm = static_cast<float>(e.spread_mm);
@@ -236,8 +255,12 @@ DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) cons
 template <typename Scalar>
 void NetworkDecoder<Scalar>::Probabilities(const ShiftsPm& shift, Data& d, std::vector<float>& out) const {
   std::array<Scalar, 16> raw{};
-  for (std::size_t i = 0; i < 16; ++i) raw[i] = std::isfinite(shift[i]) ? static_cast<Scalar>(shift[i]) : f_mean_[i];
-  RunLocation(raw, d);
+  std::array<bool, 16> present{};
+  for (std::size_t i = 0; i < 16; ++i) {
+    present[i] = std::isfinite(shift[i]);
+    raw[i] = present[i] ? static_cast<Scalar>(shift[i]) : Scalar(0);
+  }
+  RunLocation(raw, present, d);
   out = d.probabilities;
 }
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <numeric>
 #include <random>
 
@@ -60,33 +61,49 @@ struct Norm {
   std::array<float, kG> mean{}, std{};
 };
 
-// Frames' z-scored shifts, with missing values at z = 0 (the runtime does the same).
-struct Features {
-  const eval::Prepared& p;
-  Norm norm;
-  float z(std::size_t frame, int i) const {
-    const float v = p.shift_pm[frame][static_cast<std::size_t>(i)];
-    return std::isfinite(v) ? (v - norm.mean[static_cast<std::size_t>(i)]) / norm.std[static_cast<std::size_t>(i)] : 0.0f;
-  }
-};
+using Frame16 = std::array<float, kG>;
 
-Norm ComputeNorm(const eval::Prepared& p, const std::vector<std::uint32_t>& frames) {
+// What a location net sees of one frame before z-scoring (NaN where a grating is missing). With `unit`, the
+// shifts divided by their norm over the present gratings (at least `floor_pm`), as the runtime does.
+Frame16 LocationInputOf(const eval::Prepared& p, std::size_t frame, bool unit, float floor_pm) {
+  Frame16 v = p.shift_pm[frame];
+  if (!unit) return v;
+  double n2 = 0;
+  for (float x : v) {
+    if (std::isfinite(x)) n2 += static_cast<double>(x) * x;
+  }
+  const float scale = 1.0f / std::max(static_cast<float>(std::sqrt(n2)), floor_pm);
+  for (float& x : v) x *= scale;  // NaN stays NaN
+  return v;
+}
+
+// z-scored value, missing values at z = 0 (the runtime does the same).
+float Z(float v, const Norm& norm, int i) {
+  const auto u = static_cast<std::size_t>(i);
+  return std::isfinite(v) ? (v - norm.mean[u]) / norm.std[u] : 0.0f;
+}
+
+template <typename Get>  // Get: frame -> Frame16
+Norm ComputeNorm(const std::vector<std::uint32_t>& frames, Get&& get) {
   Norm n;
-  for (int i = 0; i < kG; ++i) {
-    double s = 0, s2 = 0;
-    std::size_t c = 0;
-    for (auto f : frames) {
-      const float v = p.shift_pm[f][static_cast<std::size_t>(i)];
-      if (!std::isfinite(v)) continue;
-      s += v;
-      s2 += static_cast<double>(v) * v;
-      ++c;
+  std::array<double, kG> s{}, s2{};
+  std::array<std::size_t, kG> c{};
+  for (auto f : frames) {
+    const Frame16 v = get(f);
+    for (std::size_t i = 0; i < kG; ++i) {
+      if (!std::isfinite(v[i])) continue;
+      s[i] += v[i];
+      s2[i] += static_cast<double>(v[i]) * v[i];
+      ++c[i];
     }
-    const double mean = c ? s / static_cast<double>(c) : 0.0;
-    const double var = c ? std::max(0.0, s2 / static_cast<double>(c) - mean * mean) : 1.0;
-    n.mean[static_cast<std::size_t>(i)] = static_cast<float>(mean);
+  }
+  for (std::size_t i = 0; i < kG; ++i) {
+    const double cnt = static_cast<double>(c[i]);
+    const double mean = c[i] ? s[i] / cnt : 0.0;
+    const double var = c[i] ? std::max(0.0, s2[i] / cnt - mean * mean) : 1.0;
+    n.mean[i] = static_cast<float>(mean);
     // A channel that never moves (a dead grating, or one far from every contact) must not divide by ~0.
-    n.std[static_cast<std::size_t>(i)] = static_cast<float>(std::max(std::sqrt(var), 1e-3));
+    n.std[i] = static_cast<float>(std::max(std::sqrt(var), 1e-3));
   }
   return n;
 }
@@ -139,8 +156,8 @@ class Trainer {
 
   Nets Fit(const Pools& pools, const std::string& phase) {
     Nets n;
-    n.force_norm = ComputeNorm(p_, pools.frames);
-    n.loc_norm = ComputeNorm(p_, pools.gated);
+    n.force_norm = ComputeNorm(pools.frames, [&](std::uint32_t f) { return p_.shift_pm[f]; });
+    n.loc_norm = ComputeNorm(pools.gated, [&](std::uint32_t f) { return LocRaw(f); });
     double s = 0, s2 = 0;
     for (auto f : pools.frames) {
       s += p_.force_n[f];
@@ -154,14 +171,21 @@ class Trainer {
     n.force = ForceNet(o_.window);
     std::mt19937_64 rng(o_.seed * 7919 + 1);
     TrainLoop(*n.force, pools.frames, o_.epochs_force, o_.lr_force, phase + " force", rng, [&](const auto& batch) {
-      return torch::mse_loss(n.force->forward(ForceInput(batch, n.force_norm)), ForceTarget(batch, n));
+      const auto out = n.force->forward(ForceInput(batch, n.force_norm));
+      const auto target = ForceTarget(batch, n);
+      if (o_.force_loss == "l1") return torch::l1_loss(out, target);
+      // Huber on z-scored forces: quadratic within 0.1 std (about 60 mN here), linear beyond.
+      if (o_.force_loss == "huber") return torch::huber_loss(out, target, at::Reduction::Mean, 0.1);
+      return torch::mse_loss(out, target);
     });
     for (std::size_t g = 0; g < grids_.size(); ++g) {
       torch::manual_seed(o_.seed + 101 * (g + 1));
       Mlp mlp(o_.mlp_widths, grids_[g].classes(), o_.dropout);
       TrainLoop(*mlp, pools.gated, o_.epochs_location, o_.lr_location, phase + " " + grids_[g].name, rng,
                 [&](const auto& batch) {
-                  return torch::cross_entropy_loss(mlp->forward(LocInput(batch, n.loc_norm)), LocTarget(batch, grids_[g]));
+                  const auto logits = mlp->forward(LocInput(batch, n.loc_norm));
+                  if (o_.label_sigma_mm > 0) return torch::cross_entropy_loss(logits, SoftTarget(batch, grids_[g]));
+                  return torch::cross_entropy_loss(logits, LocTarget(batch, grids_[g]));
                 });
       n.mlps.push_back(mlp);
     }
@@ -269,6 +293,10 @@ class Trainer {
       gr->set_ny(static_cast<std::uint32_t>(grids_[g].ny));
       gr->set_nr(static_cast<std::uint32_t>(grids_[g].nr));
       norm(ln->mutable_input(), n.loc_norm);
+      if (o_.location_input == "unit") {
+        ln->set_input_kind(v1::LocationNet::UNIT);
+        ln->set_unit_floor_pm(static_cast<float>(o_.unit_floor_pm));
+      }
       const auto& mlp = n.mlps[g];
       int k = 0;
       for (auto* lin : {&mlp->l1, &mlp->l2, &mlp->l3, &mlp->out}) {
@@ -345,7 +373,6 @@ class Trainer {
   }
 
   torch::Tensor ForceInput(const std::vector<std::uint32_t>& frames, const Norm& norm) const {
-    const Features feat{p_, norm};
     auto x = torch::empty({static_cast<long>(frames.size()), o_.window, kG});
     float* d = x.data_ptr<float>();
     for (std::size_t s = 0; s < frames.size(); ++s) {
@@ -353,7 +380,7 @@ class Trainer {
       for (int t = 0; t < o_.window; ++t) {
         const long back = o_.window - 1 - t;
         const std::size_t src = f >= a + static_cast<std::size_t>(back) ? f - static_cast<std::size_t>(back) : a;
-        for (int i = 0; i < kG; ++i) *d++ = feat.z(src, i);
+        for (int i = 0; i < kG; ++i) *d++ = Z(p_.shift_pm[src][static_cast<std::size_t>(i)], norm, i);
       }
     }
     return x;
@@ -365,18 +392,55 @@ class Trainer {
     return y;
   }
   torch::Tensor LocInput(const std::vector<std::uint32_t>& frames, const Norm& norm) const {
-    const Features feat{p_, norm};
     auto x = torch::empty({static_cast<long>(frames.size()), kG});
     float* d = x.data_ptr<float>();
     for (auto f : frames) {
-      for (int i = 0; i < kG; ++i) *d++ = feat.z(f, i);
+      const Frame16 v = LocRaw(f);
+      for (int i = 0; i < kG; ++i) *d++ = Z(v[static_cast<std::size_t>(i)], norm, i);
     }
     return x;
+  }
+  Frame16 LocRaw(std::size_t f) const {
+    return LocationInputOf(p_, f, o_.location_input == "unit", static_cast<float>(o_.unit_floor_pm));
   }
   torch::Tensor LocTarget(const std::vector<std::uint32_t>& frames, const decode::GridSpec& g) const {
     auto y = torch::empty({static_cast<long>(frames.size())}, torch::kLong);
     auto* d = y.data_ptr<long>();
     for (auto f : frames) *d++ = std::max(0, g.ClassOf(p_.y_mm[f], p_.r_deg[f]));
+    return y;
+  }
+
+  // Soft labels: each cell's share of a Gaussian of sigma label_sigma_mm (on the surface) around the contact,
+  // renormalised over the grid. A classifier trained on them spreads its probability like the Gaussian, so
+  // the NIP barycentre can land between fine-cell centres instead of on them.
+  torch::Tensor SoftTarget(const std::vector<std::uint32_t>& frames, const decode::GridSpec& g) const {
+    auto y = torch::empty({static_cast<long>(frames.size()), g.classes()});
+    float* d = y.data_ptr<float>();
+    const double arc_mm_per_deg = spec_.surface_radius_mm * std::numbers::pi / 180.0;
+    const double s = o_.label_sigma_mm * std::numbers::sqrt2;
+    std::vector<double> py(static_cast<std::size_t>(g.ny)), pr(static_cast<std::size_t>(g.nr));
+    for (auto f : frames) {
+      for (int i = 0; i < g.ny; ++i) {
+        const double a = g.y0_mm + i * g.cell_y_mm - p_.y_mm[f];
+        py[static_cast<std::size_t>(i)] = 0.5 * (std::erf((a + g.cell_y_mm) / s) - std::erf(a / s));
+      }
+      for (int j = 0; j < g.nr; ++j) {
+        const double a = (g.r0_deg + j * g.cell_r_deg - p_.r_deg[f]) * arc_mm_per_deg;
+        pr[static_cast<std::size_t>(j)] = 0.5 * (std::erf((a + g.cell_r_deg * arc_mm_per_deg) / s) - std::erf(a / s));
+      }
+      double total = 0;
+      for (double a : py) {
+        for (double b : pr) total += a * b;
+      }
+      if (!(total > 1e-12)) {  // the Gaussian misses the grid entirely: fall back to the nearest cell
+        const int k = std::max(0, g.ClassOf(p_.y_mm[f], p_.r_deg[f]));
+        for (int c = 0; c < g.classes(); ++c) *d++ = c == k ? 1.0f : 0.0f;
+        continue;
+      }
+      for (int i = 0; i < g.ny; ++i) {
+        for (int j = 0; j < g.nr; ++j) *d++ = static_cast<float>(py[static_cast<std::size_t>(i)] * pr[static_cast<std::size_t>(j)] / total);
+      }
+    }
     return y;
   }
 
@@ -393,6 +457,14 @@ class Trainer {
 v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec, const TrainOptions& o,
                        const std::string& dataset_path, const TrainProgress& progress) {
   if (o.window < 1 || o.window > 256) throw InputError("train: window must be 1..256");
+  if (o.force_loss != "mse" && o.force_loss != "l1" && o.force_loss != "huber") {
+    throw InputError("train: force loss must be mse, l1 or huber, not '" + o.force_loss + "'");
+  }
+  if (o.location_input != "raw" && o.location_input != "unit") {
+    throw InputError("train: location input must be raw or unit, not '" + o.location_input + "'");
+  }
+  if (!(o.label_sigma_mm >= 0 && o.label_sigma_mm <= 100)) throw InputError("train: label sigma must be 0..100 mm");
+  if (!(o.unit_floor_pm > 0)) throw InputError("train: unit floor must be > 0 pm");
   if (o.mlp_widths.size() != 3) throw InputError("train: the location MLPs have exactly 3 hidden layers");
   if (data.ids.size() < 10) throw InputError("train: the dataset has " + std::to_string(data.ids.size()) + " indentations; need at least 10");
   const auto t0 = std::chrono::steady_clock::now();
@@ -439,6 +511,8 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
   info->set_batch(static_cast<std::uint32_t>(o.batch));
   info->set_learning_rate_force(static_cast<float>(o.lr_force));
   info->set_learning_rate_location(static_cast<float>(o.lr_location));
+  info->set_force_loss(o.force_loss);
+  info->set_location_label_sigma_mm(static_cast<float>(o.label_sigma_mm));
   info->set_tool_version("ruffini 0.1.0, libtorch " TORCH_VERSION);
   info->set_seconds(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   return m;
@@ -448,6 +522,7 @@ struct TorchForceNet::Impl {
   ForceNet net{nullptr};
   std::vector<Mlp> mlps;
   std::vector<Norm> mlp_norms;
+  std::vector<float> unit_floor;  // 0: RAW input
   torch::Tensor loc_x;
   int window = 1;
   std::array<float, kG> mean{}, inv_std{};
@@ -497,6 +572,7 @@ TorchForceNet::TorchForceNet(const v1::DecoderModel& m) : impl_(new Impl) {
     }
     impl_->mlps.push_back(mlp);
     impl_->mlp_norms.push_back(nm);
+    impl_->unit_floor.push_back(ln.input_kind() == v1::LocationNet::UNIT ? ln.unit_floor_pm() : 0.0f);
   }
   impl_->loc_x = torch::empty({1, kG});
 }
@@ -506,8 +582,14 @@ void TorchForceNet::Locate(const float* s, std::vector<float>& out) {
   out.clear();
   for (std::size_t g = 0; g < impl_->mlps.size(); ++g) {
     float* d = impl_->loc_x.data_ptr<float>();
+    float scale = 1.0f;
+    if (impl_->unit_floor[g] > 0.0f) {
+      double n2 = 0;
+      for (std::size_t i = 0; i < static_cast<std::size_t>(kG); ++i) n2 += static_cast<double>(s[i]) * s[i];
+      scale = 1.0f / std::max(static_cast<float>(std::sqrt(n2)), impl_->unit_floor[g]);
+    }
     for (std::size_t i = 0; i < static_cast<std::size_t>(kG); ++i) {
-      d[i] = (s[i] - impl_->mlp_norms[g].mean[i]) / impl_->mlp_norms[g].std[i];
+      d[i] = (s[i] * scale - impl_->mlp_norms[g].mean[i]) / impl_->mlp_norms[g].std[i];
     }
     const auto p = torch::softmax(impl_->mlps[g]->forward(impl_->loc_x), 1).contiguous();
     out.insert(out.end(), p.data_ptr<float>(), p.data_ptr<float>() + p.numel());

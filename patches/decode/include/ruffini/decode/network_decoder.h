@@ -82,9 +82,11 @@ class NetworkDecoder {
   struct Mlp {
     std::array<Scalar, 16> mean{}, inv_std{};
     std::vector<Layer> layers;
+    bool unit = false;       // input divided by the shifts' norm (LocationNet.UNIT)
+    Scalar unit_floor = 1;   // pm
   };
   void RunForce(Data& d) const noexcept;
-  void RunLocation(const std::array<Scalar, 16>& raw, Data& d) const noexcept;
+  void RunLocation(const std::array<Scalar, 16>& raw, const std::array<bool, 16>& present, Data& d) const noexcept;
 
   int window_ = 1;
   std::array<Scalar, 16> f_mean_{}, f_inv_std_{};

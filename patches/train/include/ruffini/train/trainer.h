@@ -29,6 +29,10 @@ struct TrainOptions {
   double lr_location = 0.05;
   double momentum = 0.9;
   std::string optimizer = "sgd";           // sgd | adam
+  std::string force_loss = "mse";          // mse (the paper's) | l1 | huber
+  std::string location_input = "raw";      // raw (the paper's) | unit (shifts / their norm)
+  double unit_floor_pm = 1.0;              // unit: smallest norm divided by
+  double label_sigma_mm = 0.0;             // 0: one-hot cell labels (the paper's); > 0: Gaussian soft labels
   int folds = 5;                           // 0: no cross-validation
   double test_fraction = 0.15;
   double gate_n = 0.05;
