@@ -27,6 +27,7 @@ void RegisterTrain(CLI::App& app) {
     train::TrainOptions o;
   };
   auto a = std::make_shared<Args>();
+  a->o.epochs_location = 0;  // as --epochs unless given
   CLI::App* cmd = app.add_subcommand("train", "Train the paper's decoders (CNN force + 4 grid MLPs) on a dataset");
   cmd->add_option("--data", a->data, "Dataset (.h5)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--out", a->out, "Model file to write (.rmodel)")->required();
@@ -35,6 +36,8 @@ void RegisterTrain(CLI::App& app) {
   cmd->add_option("--mlp-widths", a->o.mlp_widths, "Hidden widths of the location MLPs (3)")->expected(3)->capture_default_str();
   cmd->add_option("--dropout", a->o.dropout, "Dropout of the location MLPs")->check(CLI::Range(0.0, 0.9))->capture_default_str();
   cmd->add_option("--epochs", a->o.epochs_force, "Epochs of every net")->check(CLI::Range(1, 10000))->capture_default_str();
+  cmd->add_option("--epochs-location", a->o.epochs_location, "Epochs of the location nets (0: as --epochs)")
+      ->check(CLI::Range(0, 10000))->capture_default_str();
   cmd->add_option("--frames-per-epoch", a->o.frames_per_epoch, "Samples drawn per epoch")->check(CLI::Range(256, 100000000))->capture_default_str();
   cmd->add_option("--batch", a->o.batch, "Minibatch size")->check(CLI::Range(1, 100000))->capture_default_str();
   cmd->add_option("--lr-force", a->o.lr_force, "Learning rate of the force net")->capture_default_str();
@@ -53,9 +56,9 @@ void RegisterTrain(CLI::App& app) {
       ->check(CLI::Range(1e-3, 1e3))->capture_default_str();
   cmd->add_option("--folds", a->o.folds, "Cross-validation folds inside the training part (0 = none)")->check(CLI::Range(0, 20))->capture_default_str();
   cmd->add_option("--seed", a->o.seed, "Seed (split, initialisation, sampling)")->capture_default_str();
-  cmd->add_option("--threads", a->o.threads, "Threads")->check(CLI::Range(1, 64))->capture_default_str();
+  cmd->add_option("--threads", a->o.threads, "Fits trained at once (CV folds and the final fit), one core each")->check(CLI::Range(1, 64))->capture_default_str();
   cmd->callback([a]() {
-    a->o.epochs_location = a->o.epochs_force;
+    if (a->o.epochs_location == 0) a->o.epochs_location = a->o.epochs_force;
     const patch::PatchSpec spec = patch::LoadPatchSpec(a->patch_spec);
     const dataset::Dataset d = dataset::ReadDataset(a->data);
     if (d.info.patch_name != spec.name) {
@@ -63,20 +66,15 @@ void RegisterTrain(CLI::App& app) {
     }
     spdlog::info("preparing {} frames (baseline tracking)", d.size());
     const eval::Prepared p = eval::PrepareFrames(d);
+    // One bar over every epoch of every fit (CV folds and the final fit run in parallel, one per thread).
     std::unique_ptr<ProgressBar> bar;
-    std::string phase_shown;
-    const auto m = train::Train(p, spec, a->o, a->data, [&](const std::string& phase, int e, int epochs, double loss) {
-      if (phase != phase_shown) {
-        if (bar) bar->Finish();
-        bar = std::make_unique<ProgressBar>(phase + " epochs", static_cast<std::uint64_t>(epochs));
-        phase_shown = phase;
-      }
-      char note[64];
-      std::snprintf(note, sizeof note, "epoch loss %.5f", loss);
+    const auto m = train::Train(p, spec, a->o, a->data, [&](const std::string& phase, int done, int total, double loss) {
+      if (!bar) bar = std::make_unique<ProgressBar>("training epochs", static_cast<std::uint64_t>(total));
+      char note[96];
+      std::snprintf(note, sizeof note, "%s loss %.5f", phase.c_str(), loss);
       bar->SetNote(note);
-      bar->Update(static_cast<std::uint64_t>(e));
-      spdlog::debug("{} epoch {}/{} loss {:.5f}", phase, e, epochs, loss);
-      if (e == epochs) spdlog::info("{}: final epoch loss {:.5f}", phase, loss);
+      bar->Update(static_cast<std::uint64_t>(done));
+      spdlog::debug("epoch {}/{}: {} loss {:.5f}", done, total, phase, loss);
     });
     if (bar) bar->Finish();
     decode::ValidateModel(m, a->out);

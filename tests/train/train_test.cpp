@@ -187,6 +187,36 @@ TEST(TrainTest, SameSeedSameModel) {
   EXPECT_EQ(a.location(2).dense(3).weight().SerializeAsString(), b.location(2).dense(3).weight().SerializeAsString());
 }
 
+// CV folds and the final fit run in parallel; the model must not depend on how many at once.
+TEST(TrainTest, ParallelFitsGiveTheSerialModel) {
+  TrainOptions o;
+  o.window = 4;
+  o.mlp_widths = {8, 8, 8};
+  o.epochs_force = 1;
+  o.epochs_location = 2;
+  o.frames_per_epoch = 1024;
+  o.folds = 3;
+  o.label_sigma_mm = 4.0;
+  o.threads = 1;
+  std::vector<int> seen;
+  const auto serial = Train(F().prepared, F().scene.Patch().spec, o, "x", [&](const std::string&, int done, int total, double) {
+    EXPECT_EQ(total, 4 * 3);  // 4 fits x (1 + 2) epochs
+    seen.push_back(done);
+  });
+  EXPECT_EQ(seen.size(), 12u);
+  EXPECT_EQ(seen.back(), 12);
+  o.threads = 3;
+  const auto parallel = Train(F().prepared, F().scene.Patch().spec, o, "x");
+  EXPECT_EQ(parallel.training().parallel_fits(), 3u);
+  EXPECT_EQ(serial.training().parallel_fits(), 1u);
+  EXPECT_EQ(serial.force().SerializeAsString(), parallel.force().SerializeAsString());
+  for (int k = 0; k < 4; ++k) EXPECT_EQ(serial.location(k).SerializeAsString(), parallel.location(k).SerializeAsString());
+  ASSERT_EQ(serial.training().folds_size(), parallel.training().folds_size());
+  for (int k = 0; k < serial.training().folds_size(); ++k) {
+    EXPECT_EQ(serial.training().folds(k).SerializeAsString(), parallel.training().folds(k).SerializeAsString());
+  }
+}
+
 TEST(TrainTest, RejectsBadOptions) {
   TrainOptions o;
   o.mlp_widths = {8, 8};

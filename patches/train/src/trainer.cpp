@@ -1,11 +1,17 @@
 #include "ruffini/train/trainer.h"
 
+#include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <mutex>
+#include <thread>
+#include <atomic>
+#include <exception>
 #include <numbers>
+#include <optional>
 #include <numeric>
 #include <random>
 
@@ -56,6 +62,59 @@ struct MlpImpl : torch::nn::Module {
   torch::nn::Dropout drop{nullptr};
 };
 TORCH_MODULE(Mlp);
+
+// The four grid MLPs trained as one module: every layer's weights stacked along a leading grid axis and
+// applied with one batched matrix product, so a training step costs the framework overhead of one small
+// MLP instead of four (the nets are tiny, and per-operation overhead, not arithmetic, dominated). The losses
+// are summed, so each net's gradient is the one it would get alone. Output layers are padded to the largest
+// grid; padded logits are pushed to -1e9 and never targeted. Exported as four separate nets.
+struct MlpBankImpl : torch::nn::Module {
+  MlpBankImpl(const std::vector<int>& w, const std::vector<int>& classes, double dropout_p, at::Generator generator)
+      : dropout(dropout_p), gen(std::move(generator)) {
+    const auto nets = static_cast<long>(classes.size());
+    const long widest = *std::max_element(classes.begin(), classes.end());
+    const std::array<long, 5> dims = {kG, w[0], w[1], w[2], widest};
+    for (std::size_t k = 0; k < 4; ++k) {
+      // PyTorch's Linear default: weights and biases uniform in +-1/sqrt(fan_in).
+      const double bound = 1.0 / std::sqrt(static_cast<double>(dims[k]));
+      const std::string index = std::to_string(k);  // (appending, not "w" + ...: GCC 12's -Wrestrict false positive)
+      std::string w_name = "w", b_name = "b";
+      w_name += index;
+      b_name += index;
+      weights.push_back(register_parameter(w_name, torch::empty({nets, dims[k], dims[k + 1]}).uniform_(-bound, bound, gen)));
+      biases.push_back(register_parameter(b_name, torch::empty({nets, 1, dims[k + 1]}).uniform_(-bound, bound, gen)));
+    }
+    mask = torch::zeros({nets, 1, widest});
+    for (long g = 0; g < nets; ++g) mask[g].narrow(1, classes[static_cast<std::size_t>(g)], widest - classes[static_cast<std::size_t>(g)]).fill_(-1e9);
+    mask = register_buffer("mask", mask);
+  }
+  // x [N, 16] -> logits [nets, N, widest], padded entries at -1e9.
+  torch::Tensor forward(const torch::Tensor& x) {
+    auto h = x.unsqueeze(0).expand({weights[0].size(0), x.size(0), x.size(1)});
+    for (std::size_t k = 0; k < 4; ++k) {
+      h = torch::baddbmm(biases[k], h, weights[k]);
+      if (k < 3) h = torch::relu(h);
+      if (k == 1 && is_training() && dropout > 0) {  // the one dropout layer, after the second
+        // Inverted dropout with this fit's own generator (fits run in parallel; the global one would make
+        // the masks depend on thread timing).
+        h = h * torch::empty_like(h).bernoulli_(1.0 - dropout, gen) / (1.0 - dropout);
+      }
+    }
+    return h + mask;
+  }
+  std::vector<torch::Tensor> weights, biases;
+  torch::Tensor mask;
+  double dropout;
+  at::Generator gen;
+};
+TORCH_MODULE(MlpBank);
+
+// Modules initialise from the global generator: build them one at a time, reseeded, so a fit's initial
+// weights depend on its seed only, whichever thread builds it when.
+std::mutex& InitMutex() {
+  static std::mutex m;
+  return m;
+}
 
 struct Norm {
   std::array<float, kG> mean{}, std{};
@@ -149,7 +208,7 @@ class Trainer {
 
   struct Nets {
     ForceNet force{nullptr};
-    std::vector<Mlp> mlps;
+    MlpBank mlps{nullptr};
     Norm force_norm, loc_norm;
     float f_mean = 0, f_std = 1;
   };
@@ -167,8 +226,11 @@ class Trainer {
     n.f_mean = static_cast<float>(s / cnt);
     n.f_std = static_cast<float>(std::max(1e-3, std::sqrt(std::max(0.0, s2 / cnt - (s / cnt) * (s / cnt)))));
 
-    torch::manual_seed(o_.seed);
-    n.force = ForceNet(o_.window);
+    {
+      const std::lock_guard lock(InitMutex());
+      torch::manual_seed(o_.seed);
+      n.force = ForceNet(o_.window);
+    }
     std::mt19937_64 rng(o_.seed * 7919 + 1);
     TrainLoop(*n.force, pools.frames, o_.epochs_force, o_.lr_force, phase + " force", rng, [&](const auto& batch) {
       const auto out = n.force->forward(ForceInput(batch, n.force_norm));
@@ -178,17 +240,15 @@ class Trainer {
       if (o_.force_loss == "huber") return torch::huber_loss(out, target, at::Reduction::Mean, 0.1);
       return torch::mse_loss(out, target);
     });
-    for (std::size_t g = 0; g < grids_.size(); ++g) {
-      torch::manual_seed(o_.seed + 101 * (g + 1));
-      Mlp mlp(o_.mlp_widths, grids_[g].classes(), o_.dropout);
-      TrainLoop(*mlp, pools.gated, o_.epochs_location, o_.lr_location, phase + " " + grids_[g].name, rng,
-                [&](const auto& batch) {
-                  const auto logits = mlp->forward(LocInput(batch, n.loc_norm));
-                  if (o_.label_sigma_mm > 0) return torch::cross_entropy_loss(logits, SoftTarget(batch, grids_[g]));
-                  return torch::cross_entropy_loss(logits, LocTarget(batch, grids_[g]));
-                });
-      n.mlps.push_back(mlp);
-    }
+    std::vector<int> classes;
+    for (const auto& g : grids_) classes.push_back(g.classes());
+    n.mlps = MlpBank(o_.mlp_widths, classes, o_.dropout, at::make_generator<at::CPUGeneratorImpl>(o_.seed + 101));
+    TrainLoop(*n.mlps, pools.gated, o_.epochs_location, o_.lr_location, phase + " location (4 grids)", rng,
+              [&](const auto& batch) {
+                const auto logp = torch::log_softmax(n.mlps->forward(LocInput(batch, n.loc_norm)), 2);
+                // Cross-entropy per grid (mean over the batch), summed over the grids.
+                return -(LocTargets(batch, logp.size(2)) * logp).sum(2).mean(1).sum();
+              });
     return n;
   }
 
@@ -238,15 +298,15 @@ class Trainer {
     std::size_t width = 0;
     for (const auto& g : grids_) width += static_cast<std::size_t>(g.classes());
     std::vector<float> out(frames.size() * width);
-    const auto x = LocInput(frames, n.loc_norm);
+    n.mlps->eval();
+    const auto logits = n.mlps->forward(LocInput(frames, n.loc_norm));
+    n.mlps->train();
     std::size_t offset = 0;
     for (std::size_t g = 0; g < grids_.size(); ++g) {
-      n.mlps[g]->eval();
-      const auto pr = torch::softmax(n.mlps[g]->forward(x), 1).contiguous();
-      const float* d = pr.data_ptr<float>();
       const auto c = static_cast<std::size_t>(grids_[g].classes());
+      const auto pr = torch::softmax(logits[static_cast<long>(g)].narrow(1, 0, static_cast<long>(c)), 1).contiguous();
+      const float* d = pr.data_ptr<float>();
       for (std::size_t j = 0; j < frames.size(); ++j) std::copy(d + j * c, d + (j + 1) * c, out.begin() + static_cast<std::ptrdiff_t>(j * width + offset));
-      n.mlps[g]->train();
       offset += c;
     }
     return out;
@@ -297,13 +357,18 @@ class Trainer {
         ln->set_input_kind(v1::LocationNet::UNIT);
         ln->set_unit_floor_pm(static_cast<float>(o_.unit_floor_pm));
       }
-      const auto& mlp = n.mlps[g];
-      int k = 0;
-      for (auto* lin : {&mlp->l1, &mlp->l2, &mlp->l3, &mlp->out}) {
+      for (std::size_t k = 0; k < 4; ++k) {
+        // Stacked [in, out] -> a Linear's [out, in]; the output layer loses its padding.
+        auto w = n.mlps->weights[k][static_cast<long>(g)].t();
+        auto b = n.mlps->biases[k][static_cast<long>(g)][0];
+        if (k == 3) {
+          w = w.narrow(0, 0, grids_[g].classes());
+          b = b.narrow(0, 0, grids_[g].classes());
+        }
         auto* d = ln->add_dense();
-        put(d->mutable_weight(), (*lin)->weight);
-        put(d->mutable_bias(), (*lin)->bias);
-        d->set_relu(k++ < 3);
+        put(d->mutable_weight(), w);
+        put(d->mutable_bias(), b);
+        d->set_relu(k < 3);
       }
     }
     m.mutable_gating()->set_on_n(static_cast<float>(o_.gate_n));
@@ -403,10 +468,22 @@ class Trainer {
   Frame16 LocRaw(std::size_t f) const {
     return LocationInputOf(p_, f, o_.location_input == "unit", static_cast<float>(o_.unit_floor_pm));
   }
-  torch::Tensor LocTarget(const std::vector<std::uint32_t>& frames, const decode::GridSpec& g) const {
-    auto y = torch::empty({static_cast<long>(frames.size())}, torch::kLong);
-    auto* d = y.data_ptr<long>();
-    for (auto f : frames) *d++ = std::max(0, g.ClassOf(p_.y_mm[f], p_.r_deg[f]));
+  // Every grid's target distribution, [grids, N, widest] (zero beyond a grid's cells): one-hot on the
+  // contact's cell (the paper's), or soft labels.
+  torch::Tensor LocTargets(const std::vector<std::uint32_t>& frames, long widest) const {
+    auto y = torch::zeros({static_cast<long>(grids_.size()), static_cast<long>(frames.size()), widest});
+    for (std::size_t g = 0; g < grids_.size(); ++g) {
+      const auto& grid = grids_[g];
+      if (o_.label_sigma_mm > 0) {
+        y[static_cast<long>(g)].narrow(1, 0, grid.classes()).copy_(SoftTarget(frames, grid));
+        continue;
+      }
+      auto yg = y[static_cast<long>(g)];  // a view; it must outlive the accessor
+      auto a = yg.accessor<float, 2>();
+      for (std::size_t j = 0; j < frames.size(); ++j) {
+        a[static_cast<long>(j)][std::max(0, grid.ClassOf(p_.y_mm[frames[j]], p_.r_deg[frames[j]]))] = 1.0f;
+      }
+    }
     return y;
   }
 
@@ -468,22 +545,62 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
   if (o.mlp_widths.size() != 3) throw InputError("train: the location MLPs have exactly 3 hidden layers");
   if (data.ids.size() < 10) throw InputError("train: the dataset has " + std::to_string(data.ids.size()) + " indentations; need at least 10");
   const auto t0 = std::chrono::steady_clock::now();
-  torch::set_num_threads(o.threads);
+  // One framework thread per fit: these nets are too small to gain from intra-op threads (measured: a fit
+  // is faster on one thread than on two), so the cores run whole fits (CV folds, the final fit) in parallel.
+  torch::set_num_threads(1);
   const eval::Split split = eval::MakeSplit(data, o.test_fraction, o.folds, o.seed);
-  Trainer trainer(data, spec, o, progress);
+  const int jobs = o.folds + 1;  // job 0: the final fit; job f + 1: fold f
+  const int total_epochs = jobs * (o.epochs_force + o.epochs_location);
+  std::mutex progress_mutex;
+  int epochs_done = 0;
+  const TrainProgress serial = [&](const std::string& phase, int, int, double loss) {
+    const std::lock_guard lock(progress_mutex);
+    ++epochs_done;
+    if (progress) progress(phase, epochs_done, total_epochs, loss);
+  };
+  Trainer trainer(data, spec, o, serial);
   v1::DecoderModel m;
   m.set_format_version(1);
   m.set_patch_name(spec.name);
   m.set_patch_fingerprint(spec.Fingerprint());
   m.set_surface_radius_mm(spec.surface_radius_mm);
   auto* info = m.mutable_training();
+  const Pools all_train = MakePools(data, split.train, o.gate_n), test = MakePools(data, split.test, o.gate_n);
+  std::vector<std::vector<stats::Summary>> fold_train(static_cast<std::size_t>(o.folds)), fold_val(fold_train.size());
+  std::optional<Trainer::Nets> final_nets;
+  std::vector<std::exception_ptr> errors(static_cast<std::size_t>(jobs));
+  std::atomic<int> next{0};
+  auto worker = [&]() {
+    for (int j = next++; j < jobs; j = next++) {
+      try {
+        if (j == 0) {
+          final_nets = trainer.Fit(all_train, "final");
+          continue;
+        }
+        const int f = j - 1;
+        std::vector<std::size_t> tr, va;
+        for (std::size_t k = 0; k < split.train.size(); ++k) (split.fold[k] == f ? va : tr).push_back(split.train[k]);
+        const Pools ptr = MakePools(data, tr, o.gate_n), pva = MakePools(data, va, o.gate_n);
+        auto nets = trainer.Fit(ptr, "fold " + std::to_string(f + 1) + "/" + std::to_string(o.folds));
+        fold_train[static_cast<std::size_t>(f)] = trainer.Errors(nets, ptr);
+        fold_val[static_cast<std::size_t>(f)] = trainer.Errors(nets, pva);
+      } catch (...) {
+        errors[static_cast<std::size_t>(j)] = std::current_exception();
+      }
+    }
+  };
+  {
+    std::vector<std::jthread> pool;
+    for (int t = 1; t < std::min(o.threads, jobs); ++t) pool.emplace_back(worker);
+    worker();
+  }  // joined
+  for (const auto& e : errors) {
+    if (e) std::rethrow_exception(e);
+  }
   const char* names[6] = {"force", "SG", "VSG", "HSG", "DSG", "union"};
   for (int f = 0; f < o.folds; ++f) {
-    std::vector<std::size_t> tr, va;
-    for (std::size_t k = 0; k < split.train.size(); ++k) (split.fold[k] == f ? va : tr).push_back(split.train[k]);
-    const Pools ptr = MakePools(data, tr, o.gate_n), pva = MakePools(data, va, o.gate_n);
-    auto nets = trainer.Fit(ptr, "fold " + std::to_string(f + 1) + "/" + std::to_string(o.folds));
-    const auto etr = trainer.Errors(nets, ptr), eva = trainer.Errors(nets, pva);
+    const auto& etr = fold_train[static_cast<std::size_t>(f)];
+    const auto& eva = fold_val[static_cast<std::size_t>(f)];
     for (std::size_t k = 0; k < 6; ++k) {
       auto* row = info->add_folds();
       row->set_fold(static_cast<std::uint32_t>(f + 1));
@@ -494,8 +611,7 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
       row->set_validation_iqr(eva[k].iqr());
     }
   }
-  const Pools all_train = MakePools(data, split.train, o.gate_n), test = MakePools(data, split.test, o.gate_n);
-  auto nets = trainer.Fit(all_train, "final");
+  auto& nets = *final_nets;
   trainer.Export(nets, test, m);
   for (std::size_t i : split.test) m.add_test_indentations(static_cast<std::uint32_t>(data.ids[i]));
   info->set_dataset(dataset_path);
@@ -503,6 +619,8 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
   info->set_seed(o.seed);
   info->set_optimizer(o.optimizer == "adam" ? "adam" : "sgd momentum " + std::to_string(o.momentum).substr(0, 4));
   info->set_epochs(static_cast<std::uint32_t>(o.epochs_force));
+  info->set_epochs_location(static_cast<std::uint32_t>(o.epochs_location));
+  info->set_parallel_fits(static_cast<std::uint32_t>(std::min(o.threads, jobs)));
   info->set_train_frames(all_train.frames.size());
   info->set_test_frames(test.frames.size());
   for (int w : o.mlp_widths) info->add_mlp_widths(static_cast<std::uint32_t>(w));

@@ -37,11 +37,12 @@ struct TrainOptions {
   double test_fraction = 0.15;
   double gate_n = 0.05;
   std::uint64_t seed = 1;
-  int threads = 2;
+  int threads = 2;                         // fits trained at once (one core each)
   int golden_vectors = 4;
 };
 
-// (phase, done, total, last epoch loss): phases "fold k/5" and "final".
+// (phase of the epoch just finished, e.g. "fold 2/5 force" or "final location (4 grids)"; epochs finished
+// over all fits; epochs of all fits; that epoch's mean loss). Fits run in parallel; calls are serialised.
 using TrainProgress = std::function<void(const std::string& phase, int epoch, int epochs, double loss)>;
 
 // Trains on `data` for `spec` (grids from its indented area). Fills every field of the model, including the
