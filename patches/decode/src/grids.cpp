@@ -17,6 +17,32 @@ patch::SurfacePoint GridSpec::Centre(int k) const {
   return {y0_mm + (k / nr + 0.5) * cell_y_mm, r0_deg + (k % nr + 0.5) * cell_r_deg};
 }
 
+void GridSpec::SoftLabels(double y_mm, double r_deg, double sigma_mm, double radius_mm, std::span<float> out) const {
+  const double arc_mm_per_deg = radius_mm * std::numbers::pi / 180.0;
+  const double s = sigma_mm * std::numbers::sqrt2;
+  // The Gaussian is separable: a cell's share is the product of its Y and R shares (differences of erf).
+  auto share = [s](double lo, double hi) { return 0.5 * (std::erf(hi / s) - std::erf(lo / s)); };
+  auto cell = [&](int k) {
+    const double ylo = y0_mm + (k / nr) * cell_y_mm - y_mm;
+    const double rlo = (r0_deg + (k % nr) * cell_r_deg - r_deg) * arc_mm_per_deg;
+    return share(ylo, ylo + cell_y_mm) * share(rlo, rlo + cell_r_deg * arc_mm_per_deg);
+  };
+  double total = 0.0;
+  for (int k = 0; k < classes(); ++k) total += cell(k);
+  if (!(total > 1e-12)) {
+    int nearest = 0;
+    double best = 1e300;
+    for (int k = 0; k < classes(); ++k) {
+      const auto c = Centre(k);
+      const double d = std::hypot(c.y_mm - y_mm, (c.r_deg - r_deg) * arc_mm_per_deg);
+      if (d < best) best = d, nearest = k;
+    }
+    for (int k = 0; k < classes(); ++k) out[static_cast<std::size_t>(k)] = k == nearest ? 1.0f : 0.0f;
+    return;
+  }
+  for (int k = 0; k < classes(); ++k) out[static_cast<std::size_t>(k)] = static_cast<float>(cell(k) / total);
+}
+
 std::array<GridSpec, 4> PaperGrids(const patch::Region& a) {
   const double cy = (a.y_max_mm - a.y_min_mm) / 6.0, cr = (a.r_max_deg - a.r_min_deg) / 5.0;
   return {GridSpec{"SG", a.y_min_mm, a.r_min_deg, cy, cr, 6, 5},

@@ -474,48 +474,20 @@ class Trainer {
     auto y = torch::zeros({static_cast<long>(grids_.size()), static_cast<long>(frames.size()), widest});
     for (std::size_t g = 0; g < grids_.size(); ++g) {
       const auto& grid = grids_[g];
+      auto yg = y[static_cast<long>(g)];  // a view; it must outlive the accessor
       if (o_.label_sigma_mm > 0) {
-        y[static_cast<long>(g)].narrow(1, 0, grid.classes()).copy_(SoftTarget(frames, grid));
+        // Soft labels: a classifier trained on each cell's share of a Gaussian around the contact spreads its
+        // probability the same way, so the NIP barycentre can land between fine-cell centres.
+        float* d = yg.data_ptr<float>();
+        for (std::size_t j = 0; j < frames.size(); ++j) {
+          grid.SoftLabels(p_.y_mm[frames[j]], p_.r_deg[frames[j]], o_.label_sigma_mm, spec_.surface_radius_mm,
+                          std::span<float>(d + static_cast<long>(j) * widest, static_cast<std::size_t>(grid.classes())));
+        }
         continue;
       }
-      auto yg = y[static_cast<long>(g)];  // a view; it must outlive the accessor
       auto a = yg.accessor<float, 2>();
       for (std::size_t j = 0; j < frames.size(); ++j) {
         a[static_cast<long>(j)][std::max(0, grid.ClassOf(p_.y_mm[frames[j]], p_.r_deg[frames[j]]))] = 1.0f;
-      }
-    }
-    return y;
-  }
-
-  // Soft labels: each cell's share of a Gaussian of sigma label_sigma_mm (on the surface) around the contact,
-  // renormalised over the grid. A classifier trained on them spreads its probability like the Gaussian, so
-  // the NIP barycentre can land between fine-cell centres instead of on them.
-  torch::Tensor SoftTarget(const std::vector<std::uint32_t>& frames, const decode::GridSpec& g) const {
-    auto y = torch::empty({static_cast<long>(frames.size()), g.classes()});
-    float* d = y.data_ptr<float>();
-    const double arc_mm_per_deg = spec_.surface_radius_mm * std::numbers::pi / 180.0;
-    const double s = o_.label_sigma_mm * std::numbers::sqrt2;
-    std::vector<double> py(static_cast<std::size_t>(g.ny)), pr(static_cast<std::size_t>(g.nr));
-    for (auto f : frames) {
-      for (int i = 0; i < g.ny; ++i) {
-        const double a = g.y0_mm + i * g.cell_y_mm - p_.y_mm[f];
-        py[static_cast<std::size_t>(i)] = 0.5 * (std::erf((a + g.cell_y_mm) / s) - std::erf(a / s));
-      }
-      for (int j = 0; j < g.nr; ++j) {
-        const double a = (g.r0_deg + j * g.cell_r_deg - p_.r_deg[f]) * arc_mm_per_deg;
-        pr[static_cast<std::size_t>(j)] = 0.5 * (std::erf((a + g.cell_r_deg * arc_mm_per_deg) / s) - std::erf(a / s));
-      }
-      double total = 0;
-      for (double a : py) {
-        for (double b : pr) total += a * b;
-      }
-      if (!(total > 1e-12)) {  // the Gaussian misses the grid entirely: fall back to the nearest cell
-        const int k = std::max(0, g.ClassOf(p_.y_mm[f], p_.r_deg[f]));
-        for (int c = 0; c < g.classes(); ++c) *d++ = c == k ? 1.0f : 0.0f;
-        continue;
-      }
-      for (int i = 0; i < g.ny; ++i) {
-        for (int j = 0; j < g.nr; ++j) *d++ = static_cast<float>(py[static_cast<std::size_t>(i)] * pr[static_cast<std::size_t>(j)] / total);
       }
     }
     return y;

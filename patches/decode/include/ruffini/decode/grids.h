@@ -26,6 +26,10 @@ struct GridSpec {
   // Class of a point, or -1 outside the grid.
   [[nodiscard]] int ClassOf(double y_mm, double r_deg) const;
   [[nodiscard]] patch::SurfacePoint Centre(int k) const;
+  // Soft label of a contact: each cell's share of an isotropic Gaussian of sigma_mm on the surface (R
+  // converted to arc length on radius_mm), renormalised over the grid; one-hot on the nearest cell when the
+  // Gaussian misses the grid. `out` has classes() entries.
+  void SoftLabels(double y_mm, double r_deg, double sigma_mm, double radius_mm, std::span<float> out) const;
 };
 
 // The four grids over a patch's indented area, in the paper's order SG, VSG, HSG, DSG.
