@@ -17,6 +17,9 @@ runs=(
   "l1_s3:--force-loss l1 --label-sigma-mm 3"
   "l1_s4:--force-loss l1 --label-sigma-mm 4"
   "l1_s6:--force-loss l1 --label-sigma-mm 6"
+  "bank_s4:--force-loss l1 --label-sigma-mm 4"
+  "cos_s4:--force-loss l1 --label-sigma-mm 4 --lr-schedule cosine"
+  "cos_s3:--force-loss l1 --label-sigma-mm 3 --lr-schedule cosine"
 )
 for spec in "${runs[@]}"; do
   name=${spec%%:*}
@@ -24,3 +27,7 @@ for spec in "${runs[@]}"; do
   "$bin" train --data "$data" --out "$out/$name.rmodel" "${base[@]}" "${args[@]}"
   "$bin" evaluate --model "$out/$name.rmodel" --data "$data" --report "$out/${name}_report"
 done
+# long_l1_s4: 5-fold CV, a longer force budget, no decay (26 min):
+"$bin" train --data "$data" --out "$out/long_l1_s4.rmodel" --window 8 --optimizer adam --force-loss l1 \
+  --label-sigma-mm 4 --epochs 40 --epochs-location 20 --frames-per-epoch 200000 --threads 2
+"$bin" evaluate --model "$out/long_l1_s4.rmodel" --data "$data" --report "$out/long_l1_s4_report"

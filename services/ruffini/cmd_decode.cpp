@@ -44,6 +44,8 @@ void RegisterTrain(CLI::App& app) {
   cmd->add_option("--lr-location", a->o.lr_location, "Learning rate of the location nets")->capture_default_str();
   cmd->add_option("--optimizer", a->o.optimizer, "sgd (momentum 0.9, the paper's) | adam")
       ->check(CLI::IsMember({"sgd", "adam"}))->capture_default_str();
+  cmd->add_option("--lr-schedule", a->o.lr_schedule, "constant | cosine (decays to 2 % over the epochs)")
+      ->check(CLI::IsMember({"constant", "cosine"}))->capture_default_str();
   cmd->add_option("--force-loss", a->o.force_loss, "Force net loss: mse (the paper's) | l1 (targets the median error) | huber")
       ->check(CLI::IsMember({"mse", "l1", "huber"}))->capture_default_str();
   cmd->add_option("--location-input", a->o.location_input,

@@ -19,7 +19,7 @@ namespace {
 struct Fixture {
   twin::Scene scene = twin::LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
   eval::Prepared prepared;
-  // W = 1; W = 8; W = 8 with the L1 force loss, unit-pattern location input and soft labels (the variants).
+  // W = 1; W = 8; W = 8 with the L1 force loss, unit-pattern input, soft labels and cosine decay (the variants).
   std::array<v1::DecoderModel, 3> models;
   Fixture() {
     const twin::SkinTwin t(scene.Patch().spec, scene.effects, {scene.probe.radius_mm});
@@ -38,6 +38,7 @@ struct Fixture {
         o.force_loss = "l1";
         o.location_input = "unit";
         o.label_sigma_mm = 5.0;
+        o.lr_schedule = "cosine";
       }
       o.mlp_widths = {16, 16, 16};
       o.epochs_force = o.epochs_location = 2;
@@ -110,6 +111,8 @@ TEST(TrainTest, VariantKnobsAreRecorded) {
   EXPECT_EQ(F().models[2].training().force_loss(), "l1");
   EXPECT_FLOAT_EQ(F().models[0].training().location_label_sigma_mm(), 0.0f);
   EXPECT_FLOAT_EQ(F().models[2].training().location_label_sigma_mm(), 5.0f);
+  EXPECT_EQ(F().models[0].training().lr_schedule(), "constant");
+  EXPECT_EQ(F().models[2].training().lr_schedule(), "cosine");
   for (const auto& l : F().models[0].location()) EXPECT_EQ(l.input_kind(), v1::LocationNet::RAW);
   for (const auto& l : F().models[2].location()) {
     EXPECT_EQ(l.input_kind(), v1::LocationNet::UNIT);
@@ -232,6 +235,9 @@ TEST(TrainTest, RejectsBadOptions) {
   EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
   o.unit_floor_pm = 1.0;
   o.label_sigma_mm = -1.0;
+  EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
+  o.label_sigma_mm = 0.0;
+  o.lr_schedule = "step";
   EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
 }
 

@@ -340,7 +340,8 @@ void WriteReport(const std::string& dir, const v1::DecoderModel& m, const std::s
   o << ", dropout " << t.dropout() << ", location input " << (unit ? "unit pattern (shifts / norm)" : "raw shifts")
     << (t.location_label_sigma_mm() > 0 ? ", soft location labels (sigma " + F("%.1f", t.location_label_sigma_mm()) + " mm)" : std::string())
     << ", force loss " << (t.force_loss().empty() ? std::string("mse") : t.force_loss()) << ", optimiser "
-    << t.optimizer() << ", " << t.epochs() << " epochs of "
+    << t.optimizer() << (t.lr_schedule() == "cosine" ? " (cosine learning-rate decay)" : "") << ", " << t.epochs() << " epochs (location nets "
+    << (t.epochs_location() ? t.epochs_location() : t.epochs()) << ") of "
     << t.frames_per_epoch() << " samples, batch " << t.batch() << ", seed " << t.seed() << ", trained in "
     << F("%.0f", t.seconds()) << " s on `" << t.dataset() << "`.\n";
   o << "- Data: `" << data_path << "` (" << p.source << "), " << p.ids.size() << " indentations, " << p.size()

@@ -414,8 +414,9 @@ class Trainer {
                  const std::string& phase, std::mt19937_64& rng, LossFn&& loss_fn) {
     if (pool.empty()) throw InputError("training: no samples for " + phase + " (is the dataset labelled?)");
     std::unique_ptr<torch::optim::Optimizer> opt;
+    const double base_lr = o_.optimizer == "adam" ? lr * 0.1 : lr;
     if (o_.optimizer == "adam") {
-      opt = std::make_unique<torch::optim::Adam>(net.parameters(), torch::optim::AdamOptions(lr * 0.1));
+      opt = std::make_unique<torch::optim::Adam>(net.parameters(), torch::optim::AdamOptions(base_lr));
     } else {
       opt = std::make_unique<torch::optim::SGD>(net.parameters(), torch::optim::SGDOptions(lr).momentum(o_.momentum));
     }
@@ -424,6 +425,12 @@ class Trainer {
     const int steps = std::max(1, o_.frames_per_epoch / o_.batch);
     std::vector<std::uint32_t> batch(static_cast<std::size_t>(o_.batch));
     for (int e = 0; e < epochs; ++e) {
+      if (o_.lr_schedule == "cosine") {
+        // Cosine decay over the epochs, from the base rate down to 2 % of it in the last epoch.
+        const double t = epochs > 1 ? static_cast<double>(e) / (epochs - 1) : 1.0;
+        const double rate = base_lr * (0.02 + 0.98 * 0.5 * (1.0 + std::cos(std::numbers::pi * t)));
+        for (auto& group : opt->param_groups()) group.options().set_lr(rate);
+      }
       double total = 0;
       for (int s = 0; s < steps; ++s) {
         for (auto& b : batch) b = pool[pick(rng)];
@@ -506,6 +513,9 @@ class Trainer {
 v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec, const TrainOptions& o,
                        const std::string& dataset_path, const TrainProgress& progress) {
   if (o.window < 1 || o.window > 256) throw InputError("train: window must be 1..256");
+  if (o.lr_schedule != "constant" && o.lr_schedule != "cosine") {
+    throw InputError("train: learning-rate schedule must be constant or cosine, not '" + o.lr_schedule + "'");
+  }
   if (o.force_loss != "mse" && o.force_loss != "l1" && o.force_loss != "huber") {
     throw InputError("train: force loss must be mse, l1 or huber, not '" + o.force_loss + "'");
   }
@@ -602,6 +612,7 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
   info->set_learning_rate_force(static_cast<float>(o.lr_force));
   info->set_learning_rate_location(static_cast<float>(o.lr_location));
   info->set_force_loss(o.force_loss);
+  info->set_lr_schedule(o.lr_schedule);
   info->set_location_label_sigma_mm(static_cast<float>(o.label_sigma_mm));
   info->set_tool_version("ruffini 0.1.0, libtorch " TORCH_VERSION);
   info->set_seconds(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());

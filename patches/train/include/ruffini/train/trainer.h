@@ -29,6 +29,7 @@ struct TrainOptions {
   double lr_location = 0.05;
   double momentum = 0.9;
   std::string optimizer = "sgd";           // sgd | adam
+  std::string lr_schedule = "constant";    // constant | cosine (decay to 2 % over the epochs)
   std::string force_loss = "mse";          // mse (the paper's) | l1 | huber
   std::string location_input = "raw";      // raw (the paper's) | unit (shifts / their norm)
   double unit_floor_pm = 1.0;              // unit: smallest norm divided by
