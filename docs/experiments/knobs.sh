@@ -8,22 +8,23 @@ bin=${1:-build/release/bin/ruffini}
 data=${2:-paper_seed1.h5}
 out=${3:-knobs}
 mkdir -p "$out"
-base=(--epochs 20 --frames-per-epoch 150000 --window 8 --optimizer adam --folds 0 --threads 2)
+base=(--epochs 20 --frames-per-epoch 150000 --optimizer adam --folds 0 --threads 2)
 runs=(
   "mse_raw:"
   "mse_unit:--location-input unit"
   "l1_raw:--force-loss l1"
   "l1_unit:--force-loss l1 --location-input unit"
-  "l1_s3:--force-loss l1 --label-sigma-mm 3"
   "l1_s4:--force-loss l1 --label-sigma-mm 4"
   "l1_s6:--force-loss l1 --label-sigma-mm 6"
-  "bank_s4:--force-loss l1 --label-sigma-mm 4"
   "cos_s4:--force-loss l1 --label-sigma-mm 4 --lr-schedule cosine"
   "cos_s3:--force-loss l1 --label-sigma-mm 3 --lr-schedule cosine"
+  "cos_s3_w4:--force-loss l1 --label-sigma-mm 3 --lr-schedule cosine --window 4"
+  "cos_s3_w16:--force-loss l1 --label-sigma-mm 3 --lr-schedule cosine --window 16"
 )
 for spec in "${runs[@]}"; do
   name=${spec%%:*}
   read -r -a args <<< "${spec#*:}"
+  [[ " ${args[*]} " == *" --window "* ]] || args+=(--window 8)
   "$bin" train --data "$data" --out "$out/$name.rmodel" "${base[@]}" "${args[@]}"
   "$bin" evaluate --model "$out/$name.rmodel" --data "$data" --report "$out/${name}_report"
 done
