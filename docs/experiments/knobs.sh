@@ -20,6 +20,7 @@ runs=(
   "cos_s3:--force-loss l1 --label-sigma-mm 3 --lr-schedule cosine"
   "cos_s3_w4:--force-loss l1 --label-sigma-mm 3 --lr-schedule cosine --window 4"
   "cos_s3_w16:--force-loss l1 --label-sigma-mm 3 --lr-schedule cosine --window 16"
+  "cos_s3_w32:--force-loss l1 --label-sigma-mm 3 --lr-schedule cosine --window 32"
 )
 for spec in "${runs[@]}"; do
   name=${spec%%:*}
