@@ -46,8 +46,8 @@ void RegisterTrain(CLI::App& app) {
       ->check(CLI::IsMember({"sgd", "adam"}))->capture_default_str();
   cmd->add_option("--lr-schedule", a->o.lr_schedule, "constant | cosine (decays to 2 % over the epochs)")
       ->check(CLI::IsMember({"constant", "cosine"}))->capture_default_str();
-  cmd->add_option("--force-loss", a->o.force_loss, "Force net loss: mse (the paper's) | l1 (targets the median error) | huber")
-      ->check(CLI::IsMember({"mse", "l1", "huber"}))->capture_default_str();
+  cmd->add_option("--force-loss", a->o.force_loss, "Force net loss: mse (the paper's) | l1 (targets the median error)")
+      ->check(CLI::IsMember({"mse", "l1"}))->capture_default_str();
   cmd->add_option("--location-input", a->o.location_input,
                   "What the location MLPs see: raw shifts (the paper's) | unit (shifts over their norm: the pattern only)")
       ->check(CLI::IsMember({"raw", "unit"}))->capture_default_str();

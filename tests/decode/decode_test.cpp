@@ -14,6 +14,7 @@
 #include "ruffini/patch/geometry.h"
 #include "ruffini/patch/spec_loader.h"
 #include "ruffini/stats.h"
+#include "../common/golden.h"
 #include "synthetic_model.h"
 
 namespace ruffini::decode {
@@ -448,9 +449,7 @@ TEST(ShippedModelTest, LoadsMatchesThePatchAndDecodesItsGoldenVectors) {
   NetworkDecoder<float>::Data a(d);
   for (const auto& g : m.golden()) {
     EXPECT_NEAR(d.ForceOnWindow(g.window_shift_pm().data(), a), g.force_n(), 1e-5 * std::max(1.0f, std::abs(g.force_n())));
-    ShiftsPm last{};
-    const int base = (static_cast<int>(m.force().window()) - 1) * 16;
-    for (int i = 0; i < 16; ++i) last[static_cast<std::size_t>(i)] = g.window_shift_pm(base + i);
+    const ShiftsPm last = ruffini::testing::LastFrame(g, m);
     std::vector<float> p;
     d.Probabilities(last, a, p);
     ASSERT_EQ(static_cast<int>(p.size()), g.probabilities_size());

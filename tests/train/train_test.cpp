@@ -12,6 +12,7 @@
 #include "ruffini/train/trainer.h"
 #include "ruffini/twin/protocols.h"
 #include "ruffini/twin/scene.h"
+#include "../common/golden.h"
 
 namespace ruffini::train {
 namespace {
@@ -81,9 +82,7 @@ TEST(TrainTest, RuntimeMatchesLibtorchOnGoldenVectors) {
       const float fd = dd.ForceOnWindow(g.window_shift_pm().data(), ad);
       EXPECT_NEAR(ff, g.force_n(), 1e-5 * std::max(1.0f, std::abs(g.force_n())));
       EXPECT_NEAR(fd, g.force_n(), 1e-5 * std::max(1.0f, std::abs(g.force_n())));
-      decode::ShiftsPm last{};
-      const int base = (static_cast<int>(m.force().window()) - 1) * 16;
-      for (int i = 0; i < 16; ++i) last[static_cast<std::size_t>(i)] = g.window_shift_pm(base + i);
+      const decode::ShiftsPm last = testing::LastFrame(g, m);
       std::vector<float> p;
       df.Probabilities(last, af, p);
       ASSERT_EQ(static_cast<int>(p.size()), g.probabilities_size());
@@ -127,9 +126,7 @@ TEST(TrainTest, TorchEagerLocateEqualsRuntime) {
     decode::NetworkDecoder<float> d(m);
     decode::NetworkDecoder<float>::Data a(d);
     for (const auto& g : m.golden()) {
-      decode::ShiftsPm last{};
-      const int base = (static_cast<int>(m.force().window()) - 1) * 16;
-      for (int i = 0; i < 16; ++i) last[static_cast<std::size_t>(i)] = g.window_shift_pm(base + i);
+      const decode::ShiftsPm last = testing::LastFrame(g, m);
       std::vector<float> pt, pr;
       torch_net.Locate(last.data(), pt);
       d.Probabilities(last, a, pr);
@@ -147,12 +144,8 @@ TEST(TrainTest, UnitInputIsScaleInvariant) {
     decode::NetworkDecoder<float> d(m);
     decode::NetworkDecoder<float>::Data a(d);
     const auto& g = m.golden(0);
-    decode::ShiftsPm s{}, s3{};
-    const int base = (static_cast<int>(m.force().window()) - 1) * 16;
-    for (int i = 0; i < 16; ++i) {
-      s[static_cast<std::size_t>(i)] = g.window_shift_pm(base + i);
-      s3[static_cast<std::size_t>(i)] = 3.0f * g.window_shift_pm(base + i);
-    }
+    decode::ShiftsPm s = testing::LastFrame(g, m), s3 = s;
+    for (float& v : s3) v *= 3.0f;
     std::vector<float> p1, p3;
     d.Probabilities(s, a, p1);
     d.Probabilities(s3, a, p3);

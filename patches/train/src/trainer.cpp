@@ -235,10 +235,7 @@ class Trainer {
     TrainLoop(*n.force, pools.frames, o_.epochs_force, o_.lr_force, phase + " force", rng, [&](const auto& batch) {
       const auto out = n.force->forward(ForceInput(batch, n.force_norm));
       const auto target = ForceTarget(batch, n);
-      if (o_.force_loss == "l1") return torch::l1_loss(out, target);
-      // Huber on z-scored forces: quadratic within 0.1 std (about 60 mN here), linear beyond.
-      if (o_.force_loss == "huber") return torch::huber_loss(out, target, at::Reduction::Mean, 0.1);
-      return torch::mse_loss(out, target);
+      return o_.force_loss == "l1" ? torch::l1_loss(out, target) : torch::mse_loss(out, target);
     });
     std::vector<int> classes;
     for (const auto& g : grids_) classes.push_back(g.classes());
@@ -516,8 +513,8 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
   if (o.lr_schedule != "constant" && o.lr_schedule != "cosine") {
     throw InputError("train: learning-rate schedule must be constant or cosine, not '" + o.lr_schedule + "'");
   }
-  if (o.force_loss != "mse" && o.force_loss != "l1" && o.force_loss != "huber") {
-    throw InputError("train: force loss must be mse, l1 or huber, not '" + o.force_loss + "'");
+  if (o.force_loss != "mse" && o.force_loss != "l1") {
+    throw InputError("train: force loss must be mse or l1, not '" + o.force_loss + "'");
   }
   if (o.location_input != "raw" && o.location_input != "unit") {
     throw InputError("train: location input must be raw or unit, not '" + o.location_input + "'");

@@ -3,9 +3,10 @@
 //
 // Force: a CNN (3 x [conv 16 filters, kernel 16, stride 1, 'same' padding, ReLU, max-pool 2], flatten,
 // dense 100 ReLU, dense 1) over a window of the last W frames of 16 z-scored shifts, regressing the
-// z-scored load-cell force, MSE. Location: one MLP per grid (3 hidden ReLU layers, dropout after the second,
-// softmax over the grid's cells), cross-entropy, trained on frames whose force label exceeds the gate.
-// SGD with momentum 0.9 (Adam as a measured variant). Fixed seeds. Whole indentations are never split.
+// z-scored load-cell force, MSE (L1 as a measured variant). Location: one MLP per grid (3 hidden ReLU layers,
+// dropout after the second, softmax over the grid's cells), cross-entropy against the contact's cell (or soft
+// Gaussian labels, a measured variant), trained on frames whose force label exceeds the gate. SGD with
+// momentum 0.9 (Adam and cosine decay as measured variants). Fixed seeds. Whole indentations are never split.
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -30,7 +31,7 @@ struct TrainOptions {
   double momentum = 0.9;
   std::string optimizer = "sgd";           // sgd | adam
   std::string lr_schedule = "constant";    // constant | cosine (decay to 2 % over the epochs)
-  std::string force_loss = "mse";          // mse (the paper's) | l1 | huber
+  std::string force_loss = "mse";          // mse (the paper's) | l1
   std::string location_input = "raw";      // raw (the paper's) | unit (shifts / their norm)
   double unit_floor_pm = 1.0;              // unit: smallest norm divided by
   double label_sigma_mm = 0.0;             // 0: one-hot cell labels (the paper's); > 0: Gaussian soft labels
