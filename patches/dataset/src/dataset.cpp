@@ -776,3 +776,45 @@ Dataset ReadDataset(const std::string& path) {
 }
 
 }  // namespace ruffini::dataset
+
+namespace ruffini::dataset {
+
+void WriteColumns(const std::string& path, const std::string& group, std::span<const Column> columns,
+                  const std::vector<std::pair<std::string, std::string>>& attributes) {
+  ErrorPrintingOff quiet;
+  std::size_t rows = columns.empty() ? 0 : columns.front().rows;
+  for (const Column& c : columns) {
+    if (c.rows != rows) {
+      throw InputError(path + ": column '" + c.name + "' has " + std::to_string(c.rows) + " rows, expected " + std::to_string(rows));
+    }
+    if (c.cols < 1) throw InputError(path + ": column '" + c.name + "' has no columns");
+  }
+  Handle fcpl = MakePlist(H5P_FILE_CREATE, path);
+  Check(H5Pset_obj_track_times(fcpl.get(), false), path, "cannot set up the file");
+  Handle file(Check(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, fcpl.get(), H5P_DEFAULT), path, "cannot create the file"),
+              H5Fclose);
+  for (const auto& [k, v] : attributes) WriteStringAttr(file.get(), "/", k, v, path);
+  const std::string gname = "/" + group;
+  Handle g = CreateGroup(file.get(), group.c_str(), gname, path);
+  for (const Column& c : columns) {
+    const std::string what = "cannot write " + gname + "/" + c.name;
+    hid_t type = H5T_NATIVE_FLOAT;
+    switch (c.type) {
+      case Column::Type::kF32: type = H5T_NATIVE_FLOAT; break;
+      case Column::Type::kU8: type = H5T_NATIVE_UINT8; break;
+      case Column::Type::kI32: type = H5T_NATIVE_INT32; break;
+    }
+    const hsize_t dims[2] = {static_cast<hsize_t>(c.rows), static_cast<hsize_t>(c.cols)};
+    Handle space(Check(H5Screate_simple(c.cols == 1 ? 1 : 2, dims, nullptr), path, what), H5Sclose);
+    Handle dcpl = MakePlist(H5P_DATASET_CREATE, path);
+    Check(H5Pset_obj_track_times(dcpl.get(), false), path, what);
+    Handle ds(Check(H5Dcreate2(g.get(), c.name.c_str(), type, space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT), path, what),
+              H5Dclose);
+    if (rows > 0) Check(H5Dwrite(ds.get(), type, H5S_ALL, H5S_ALL, H5P_DEFAULT, c.data), path, what);
+    Check(ds.Close(), path, what);
+  }
+  Check(g.Close(), path, "cannot close " + gname);
+  Check(file.Close(), path, "cannot close the file");
+}
+
+}  // namespace ruffini::dataset

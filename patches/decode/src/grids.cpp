@@ -114,12 +114,17 @@ Nip::Estimate Nip::Fuse(std::span<const float> p, double radius_mm) const noexce
   e.r_deg = sr / sw;
   e.confidence = best / static_cast<double>(grids_);
   const double mm_per_deg = radius_mm * std::numbers::pi / 180.0;
-  double s2 = 0;
+  double syy = 0, sya = 0, saa = 0;
   for (std::size_t c = 0; c < centre_y_.size(); ++c) {
     const double dy = centre_y_[c] - e.y_mm, da = (centre_r_[c] - e.r_deg) * mm_per_deg;
-    s2 += w[c] * (dy * dy + da * da);
+    syy += w[c] * dy * dy;
+    sya += w[c] * dy * da;
+    saa += w[c] * da * da;
   }
-  e.spread_mm = std::sqrt(s2 / sw);
+  e.cov_yy_mm2 = syy / sw;
+  e.cov_ya_mm2 = sya / sw;
+  e.cov_aa_mm2 = saa / sw;
+  e.spread_mm = std::sqrt(e.cov_yy_mm2 + e.cov_aa_mm2);
   return e;
 }
 

@@ -265,6 +265,8 @@ DecodeOutput InversionDecoder::Decode(const ShiftsPm& s) const noexcept {
   o.y_mm = static_cast<float>(f.y_mm);
   o.r_deg = static_cast<float>(f.r_deg);
   o.location_sigma_mm = static_cast<float>(std::hypot(f.sigma_y_mm, f.sigma_r_mm));
+  o.cov_yy_mm2 = static_cast<float>(f.sigma_y_mm * f.sigma_y_mm);
+  o.cov_aa_mm2 = static_cast<float>(f.sigma_r_mm * f.sigma_r_mm);
   // A single contact explains the shifts to within the model's error: chi2 near its typical level. Two
   // touches or a lying grating leave large residuals, and the confidence drops.
   o.confidence = static_cast<float>(1.0 / (1.0 + f.chi2_reduced / 100.0));

@@ -128,6 +128,40 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
       }
     }
     if (!(m.gating().on_n() >= m.gating().off_n())) throw InputError("gating on_n must be >= off_n");
+    if (m.has_input_range()) {
+      const auto& r = m.input_range();
+      if (r.min_shift_pm_size() != 16 || r.max_shift_pm_size() != 16) {
+        throw InputError("input_range has " + std::to_string(r.min_shift_pm_size()) + " minima and " +
+                         std::to_string(r.max_shift_pm_size()) + " maxima, expected 16 each");
+      }
+      for (int i = 0; i < 16; ++i) {
+        if (!(std::isfinite(r.min_shift_pm(i)) && std::isfinite(r.max_shift_pm(i)) && r.min_shift_pm(i) <= r.max_shift_pm(i))) {
+          throw InputError("input_range grating " + std::to_string(i + 1) + " has min " + std::to_string(r.min_shift_pm(i)) +
+                           " and max " + std::to_string(r.max_shift_pm(i)) + " (must be finite, min <= max)");
+        }
+      }
+      if (!(std::isfinite(r.margin_pm()) && r.margin_pm() >= 0)) throw InputError("input_range margin_pm must be finite and >= 0");
+    }
+    if (m.has_uncertainty()) {
+      const auto& u = m.uncertainty();
+      const int n = u.force_knots_n_size();
+      if (n < 1 || u.force_sd_n_size() != n || u.position_scale_size() != n) {
+        throw InputError("uncertainty has " + std::to_string(n) + " knots, " + std::to_string(u.force_sd_n_size()) +
+                         " force sds and " + std::to_string(u.position_scale_size()) + " position scales (need >= 1, all equal)");
+      }
+      for (int k = 0; k < n; ++k) {
+        if (!std::isfinite(u.force_knots_n(k)) || (k > 0 && !(u.force_knots_n(k) > u.force_knots_n(k - 1)))) {
+          throw InputError("uncertainty force_knots_n must be finite and ascending");
+        }
+        if (!(std::isfinite(u.force_sd_n(k)) && u.force_sd_n(k) > 0) || !(std::isfinite(u.position_scale(k)) && u.position_scale(k) > 0)) {
+          throw InputError("uncertainty knot " + std::to_string(k) + " has force sd " + std::to_string(u.force_sd_n(k)) +
+                           " and position scale " + std::to_string(u.position_scale(k)) + " (must be finite and > 0)");
+        }
+      }
+      if (!(std::isfinite(u.position_floor_mm2()) && u.position_floor_mm2() >= 0)) {
+        throw InputError("uncertainty position_floor_mm2 must be finite and >= 0");
+      }
+    }
   } catch (const InputError& e) {
     throw InputError(where + ": " + e.what());
   }

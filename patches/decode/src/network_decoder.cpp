@@ -246,6 +246,9 @@ DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) cons
   const Nip::Estimate e = nip_->Fuse(d.probabilities, radius_mm_);
   out.confidence = static_cast<float>(e.confidence);
   out.location_sigma_mm = static_cast<float>(e.spread_mm);
+  out.cov_yy_mm2 = static_cast<float>(e.cov_yy_mm2);
+  out.cov_ya_mm2 = static_cast<float>(e.cov_ya_mm2);
+  out.cov_aa_mm2 = static_cast<float>(e.cov_aa_mm2);
   out.y_mm = static_cast<float>(e.y_mm);
   out.r_deg = static_cast<float>(e.r_deg);
   out.located = e.ok;

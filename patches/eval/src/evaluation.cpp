@@ -134,6 +134,14 @@ Evaluation Evaluate(const Prepared& p, const Predictions& pred, const patch::Pat
     train_y.push_back(p.y_mm[k]);
     train_r.push_back(p.r_deg[k]);
   }
+  if (train_force.empty()) {  // unseen data, every indentation scored: the guess is the data's own medians
+    for (std::size_t k = 0; k < p.size(); ++k) {
+      if (p.indentation[k] < 0) continue;
+      train_force.push_back(p.force_n[k]);
+      train_y.push_back(p.y_mm[k]);
+      train_r.push_back(p.r_deg[k]);
+    }
+  }
   ev.rg_force_guess_n = stats::Median(train_force);
   ev.rg_location_guess = {stats::Median(train_y), stats::Median(train_r)};
 
@@ -232,42 +240,14 @@ Evaluation Evaluate(const Prepared& p, const Predictions& pred, const patch::Pat
 }
 
 void WritePredictions(const std::string& path, const Predictions& pred) {
-  // Plain HDF5 C API: a handful of 1-D datasets, no timestamps (bit-identical for identical predictions).
-  H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
-  const hid_t fcpl = H5Pcreate(H5P_FILE_CREATE);
-  const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, fcpl, H5P_DEFAULT);
-  H5Pclose(fcpl);
-  if (file < 0) throw InputError(path + ": cannot create the predictions file");
-  const hid_t gcpl = H5Pcreate(H5P_GROUP_CREATE);
-  H5Pset_obj_track_times(gcpl, false);
-  const hid_t group = H5Gcreate2(file, "pred", H5P_DEFAULT, gcpl, H5P_DEFAULT);
-  H5Pclose(gcpl);
-  const hsize_t n = pred.force_n.size();
-  auto write = [&](const char* name, hid_t type, const void* data) {
-    const hid_t space = H5Screate_simple(1, &n, nullptr);
-    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
-    H5Pset_obj_track_times(dcpl, false);
-    const hid_t ds = H5Dcreate2(group, name, type, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
-    const herr_t st = ds < 0 ? -1 : H5Dwrite(ds, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data);
-    if (ds >= 0) H5Dclose(ds);
-    H5Pclose(dcpl);
-    H5Sclose(space);
-    if (st < 0) throw InputError(path + ": cannot write /pred/" + name);
+  using dataset::Column;
+  const std::size_t n = pred.force_n.size();
+  const Column cols[] = {
+      {"force_n", Column::Type::kF32, n, 1, pred.force_n.data()}, {"y_mm", Column::Type::kF32, n, 1, pred.y_mm.data()},
+      {"r_deg", Column::Type::kF32, n, 1, pred.r_deg.data()},     {"valid", Column::Type::kU8, n, 1, pred.valid.data()},
+      {"located", Column::Type::kU8, n, 1, pred.located.data()},  {"test", Column::Type::kU8, n, 1, pred.test.data()},
   };
-  try {
-    write("force_n", H5T_NATIVE_FLOAT, pred.force_n.data());
-    write("y_mm", H5T_NATIVE_FLOAT, pred.y_mm.data());
-    write("r_deg", H5T_NATIVE_FLOAT, pred.r_deg.data());
-    write("valid", H5T_NATIVE_UINT8, pred.valid.data());
-    write("located", H5T_NATIVE_UINT8, pred.located.data());
-    write("test", H5T_NATIVE_UINT8, pred.test.data());
-  } catch (...) {
-    H5Gclose(group);
-    H5Fclose(file);
-    throw;
-  }
-  H5Gclose(group);
-  if (H5Fclose(file) < 0) throw InputError(path + ": cannot close the predictions file");
+  dataset::WriteColumns(path, "pred", cols);
 }
 
 namespace {
@@ -318,7 +298,7 @@ std::string Row(const std::string& what, const std::string& paper, const std::st
 
 void WriteReport(const std::string& dir, const v1::DecoderModel& m, const std::string& data_path, const Prepared& p,
                  const Predictions& pred, const Evaluation& ev, const patch::PatchSpec& spec,
-                 const std::string& command, const std::string& extra) {
+                 const std::string& command, const std::string& extra, const std::string& front) {
   std::filesystem::create_directories(dir);
   const std::filesystem::path d(dir);
   WritePredictions((d / "predictions.h5").string(), pred);
@@ -347,6 +327,7 @@ void WriteReport(const std::string& dir, const v1::DecoderModel& m, const std::s
   o << "- Data: `" << data_path << "` (" << p.source << "), " << p.ids.size() << " indentations, " << p.size()
     << " frames; test set: " << m.test_indentations_size() << " held-out indentations (" << ev.force_frames
     << " frames, " << ev.location_frames << " above the 50 mN gate).\n\n";
+  o << front;
   o << "## Test set, side by side with the paper\n\n| measure | paper | ours |\n|---|---|---|\n";
   o << Row("force error, median (IQR)", "35 mN (56)", F("%.1f mN", ev.force_error_mn.median) + " (" + F("%.1f", ev.force_error_mn.iqr()) + ")");
   o << Row("location error, median (IQR)", "3.2 mm (2.3)", F("%.2f mm", ev.location_error_mm.median) + " (" + F("%.2f", ev.location_error_mm.iqr()) + ")");

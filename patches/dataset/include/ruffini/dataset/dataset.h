@@ -94,6 +94,19 @@ class DatasetWriter {
 // Reads and validates a dataset file: format, version, every dataset present with the right type and
 // shape. Throws ruffini::InputError naming the file and what is wrong.
 Dataset ReadDataset(const std::string& path);
+// A column of a side file (predictions, per-frame results): rows x cols, row-major, of one element type.
+struct Column {
+  enum class Type { kF32, kU8, kI32 };
+  std::string name;
+  Type type = Type::kF32;
+  std::size_t rows = 0, cols = 1;
+  const void* data = nullptr;
+};
+// Writes the columns under /group of a new file (truncating an existing one), no timestamps (same input,
+// bit-identical file), with string attributes on the root. All columns must have the same rows. Throws
+// ruffini::InputError naming the path and the column.
+void WriteColumns(const std::string& path, const std::string& group, std::span<const Column> columns,
+                  const std::vector<std::pair<std::string, std::string>>& attributes = {});
 // Writes a whole in-memory dataset (uses DatasetWriter).
 void WriteDataset(const std::string& path, const Dataset& data, int compression_level = 0);
 

@@ -2,12 +2,24 @@
 // Baseline per grating: the unloaded peak wavelength that shifts are measured against.
 //
 // Start-up: the first capture_frames frames in which every present peak stays within capture_tolerance_pm of
-// its running mean are averaged (a touch during capture restarts it). Then the baseline follows slow drift
-// (temperature) with a first-order filter of time constant drift_tau_s, but only while untouched: any
-// |shift| above touch_on_pm freezes it until every shift has stayed below touch_off_pm for release_frames
-// frames, so a long press is never eaten. A missing peak (NaN) leaves its baseline alone. The filter lags a
-// drift by rate x drift_tau_s: drift faster than touch_on_pm / drift_tau_s (0.1 pm/s by default, about
-// 0.01 C/s) reads as a touch and freezes the baseline until it settles.
+// its running mean are averaged (a touch during capture restarts it). Then:
+//
+// - Common mode (common_mode = true). Temperature moves every grating alike (about 10 pm/C); a touch moves
+//   a few. Each frame's common-mode shift is the median of the present gratings' shifts; it is subtracted
+//   from every grating before anything else looks at the shifts, so uniform drift never reads as a touch,
+//   however fast it is, and the baseline keeps following it while a touch is on (the median of 16 is
+//   untouched by a contact that moves up to 7 gratings). What remains of a drift is its per-grating
+//   spread (a few % of it), which the slow filter below follows between touches.
+// - Slow filter. While untouched the baseline follows each grating with a first-order filter of time
+//   constant drift_tau_s.
+// - Freeze. The slow filter stops while any common-mode-free |shift| exceeds touch_on_pm OR the caller
+//   says a touch is on (`hold`: the decoder's own force gate). Both must stay quiet (every |shift| below
+//   touch_off_pm, no hold) for release_frames frames before it resumes. So a long light press that moves no
+//   grating by touch_on_pm is not eaten as long as the decoder sees it.
+// - Staleness. Frozen longer than max_frozen_s is reported (stale()); the baseline is NOT released, since
+//   releasing it under a real press would eat the press: the pipeline turns a stale baseline into an
+//   invalid frame (a fault upstream), never into a quiet one.
+//
 // Real-time safe: no allocation, no lock, no throw.
 #include <array>
 #include <cstdint>
@@ -26,6 +38,10 @@ struct BaselineConfig {
   double touch_on_pm = 3.0;
   double touch_off_pm = 1.5;
   int release_frames = 20;
+  bool common_mode = true;       // remove each frame's median shift (see above); false = the paper's raw shifts
+  int min_common_mode_gratings = 9;  // fewer present gratings: no common-mode estimate (shifts left raw)
+  double common_mode_tau_s = 1.0;    // while frozen, the baseline follows the common mode with this filter
+  double max_frozen_s = 300.0;   // frozen longer than this: stale()
 };
 
 class BaselineTracker {
@@ -34,12 +50,21 @@ class BaselineTracker {
 
   enum class State : std::uint8_t { kCapturing, kTracking, kFrozen };
 
-  // Feeds one frame; writes shifts (pm, NaN where the peak is missing or no baseline yet). Returns true when
-  // the shifts are usable (a baseline exists for every present peak).
-  bool Update(const Wavelengths& wavelength_nm, ShiftsPm& shift_pm) noexcept;
+  // Feeds one frame; writes shifts (pm, NaN where the peak is missing or no baseline yet), common mode
+  // removed when configured. `hold` keeps the slow filter frozen (the decoder's gate). Returns true when
+  // the shifts are usable (a baseline exists).
+  bool Update(const Wavelengths& wavelength_nm, ShiftsPm& shift_pm, bool hold = false) noexcept;
 
   [[nodiscard]] State state() const noexcept { return state_; }
   [[nodiscard]] const Wavelengths& baseline_nm() const noexcept { return baseline_nm_; }
+  // The last frame's common-mode shift (pm, 0 when off or not estimable).
+  [[nodiscard]] float common_mode_pm() const noexcept { return common_mode_pm_; }
+  // How long the baseline has been frozen, s (0 while tracking).
+  [[nodiscard]] double frozen_s() const noexcept { return static_cast<double>(frozen_frames_) / config_.sample_rate_hz; }
+  [[nodiscard]] bool stale() const noexcept { return frozen_s() > config_.max_frozen_s; }
+  // Baseline drift since capture: the mean over gratings of baseline - captured baseline, pm.
+  [[nodiscard]] double drift_pm() const noexcept;
+  [[nodiscard]] const BaselineConfig& config() const noexcept { return config_; }
   // Sets a known baseline (e.g. a dataset's reference) and starts tracking.
   void Seed(const Wavelengths& baseline_nm) noexcept;
   void Reset() noexcept;
@@ -48,10 +73,16 @@ class BaselineTracker {
   BaselineConfig config_;
   State state_ = State::kCapturing;
   Wavelengths baseline_nm_{};
+  Wavelengths captured_nm_{};
   Wavelengths sum_nm_{};
   std::array<int, kGratings> count_{};
   int captured_ = 0;
   int quiet_frames_ = 0;
+  std::int64_t frozen_frames_ = 0;
+  float common_mode_pm_ = 0.0f;
 };
+
+// The median of the finite entries (NaN when fewer than min_count). No allocation.
+float MedianOfPresent(const ShiftsPm& shift_pm, int min_count) noexcept;
 
 }  // namespace ruffini::decode

@@ -44,6 +44,9 @@ class Nip {
     double y_mm = 0, r_deg = 0;
     double confidence = 0;  // largest fine-cell weight / grids, 0..1
     double spread_mm = 0;   // weighted RMS distance of the fine cells from the estimate, on the surface
+    // Weighted covariance of the fine-cell centres about the estimate, on the surface (y, and arc length a
+    // = R in radians x surface radius), mm^2. Uncalibrated: the pipeline scales it (model Uncertainty).
+    double cov_yy_mm2 = 0, cov_ya_mm2 = 0, cov_aa_mm2 = 0;
     bool ok = false;        // false when every weight is 0 (nothing to locate)
   };
   // probabilities: each grid's softmax, concatenated in grid order. One pass fuses the weights; a second

@@ -20,6 +20,8 @@ struct DecodeOutput {
   float force_n = 0.0f;
   float y_mm = 0.0f, r_deg = 0.0f;      // valid when located
   float location_sigma_mm = 0.0f;       // spread of the fused cell weights around the estimate
+  // Raw (uncalibrated) 2x2 covariance of the estimate on the surface: y and arc length, mm^2.
+  float cov_yy_mm2 = 0.0f, cov_ya_mm2 = 0.0f, cov_aa_mm2 = 0.0f;
   float confidence = 0.0f;              // largest fused cell weight / grids, 0..1
   bool in_contact = false;              // the force gate (with hysteresis) is open
   bool located = false;                 // y/r computed this frame

@@ -103,10 +103,11 @@ struct PaperNumbers {
   static constexpr double kCohensDForce = 0.84, kCohensDLocation = 1.90;
 };
 
-// Writes DIR/report.md, DIR/*.svg and DIR/predictions.h5. `extra` is Markdown appended (other decoders).
+// Writes DIR/report.md, DIR/*.svg and DIR/predictions.h5. `front` is Markdown placed before the paper's tables,
+// `extra` Markdown appended (other decoders).
 void WriteReport(const std::string& dir, const v1::DecoderModel& model, const std::string& data_path,
                  const Prepared& data, const Predictions& pred, const Evaluation& ev, const patch::PatchSpec& spec,
-                 const std::string& command, const std::string& extra = "");
+                 const std::string& command, const std::string& extra = "", const std::string& front = "");
 // /pred/force_n, /pred/y_mm, /pred/r_deg (f32), /pred/valid, /pred/located, /pred/test (u8), aligned with frames.
 void WritePredictions(const std::string& path, const Predictions& pred);
 

@@ -1,0 +1,127 @@
+#pragma once
+// The per-frame decode path, the one code every consumer runs: `ruffini decode` over a dataset, `ruffini
+// evaluate`, and the decoder service over a live interrogator stream. One call per interrogator frame, in
+// stream order, never reset between touches:
+//
+//   peaks (nm) + source flags
+//     -> plausibility of the raw frame (saturation, no light, a peak outside its grating's band, too many
+//        peaks missing)
+//     -> baseline (common mode removed, frozen while the decoder's own gate is open; see baseline.h)
+//     -> plausibility of the shifts (baseline stale, a shift outside the range the model was calibrated on)
+//     -> the paper's networks (force CNN over a window, gated grid MLPs + NIP)
+//     -> calibrated uncertainty (force sd, 2x2 position covariance on the surface)
+//
+// A frame that fails a check is invalid with one Reason and carries no force (0, never NaN); it is not fed
+// to the networks' window, so it cannot poison later frames. Reasons are counted; the decoder service turns
+// persistent ones into faults. Model (immutable) and Data (per stream) are separate, as in NetworkDecoder.
+#include <array>
+#include <cstdint>
+#include <string_view>
+
+#include "ruffini/decode/baseline.h"
+#include "ruffini/decode/network_decoder.h"
+#include "ruffini/patch/spec.h"
+#include "ruffini/v1/model.pb.h"
+
+namespace ruffini::decode {
+
+enum class Reason : std::uint8_t {
+  kOk = 0,
+  kCapturing,       // no baseline yet (start-up capture of the untouched peaks)
+  kSaturated,       // the source flagged the frame as saturated (a peak clipped: overload)
+  kNoSignal,        // every peak missing or at 0 nm: no light, a broken fibre, an empty frame
+  kOutOfBand,       // a peak outside its grating's band: it cannot be that grating's peak
+  kTooManyMissing,  // more missing peaks than max_missing
+  kBaselineStale,   // the baseline has been frozen longer than max_frozen_s
+  kOutOfRange,      // a shift outside what the model was calibrated on (or a z-score beyond z_limit)
+  kNonFinite,       // the networks produced a non-finite force (a broken model; never expected)
+};
+inline constexpr std::size_t kReasonCount = 9;
+// snake_case names, stable: used as metric label values and in prediction files.
+std::string_view ReasonName(Reason r) noexcept;
+
+struct PipelineConfig {
+  BaselineConfig baseline;     // sample_rate_hz must be the stream's rate; common_mode is set from the model
+  int max_missing = 3;         // missing peaks tolerated (each replaced by its training mean)
+  double band_margin_nm = 0.1; // a peak may sit this far beyond its band (cast tolerance) before it is out of band
+  double z_limit = 40.0;       // models without an InputRange: |z| of any shift above this is out of range
+};
+
+struct PipelineOutput {
+  float force_n = 0.0f;        // 0 when invalid
+  float force_sd_n = 0.0f;     // calibrated 1-sigma; NaN when the model has no Uncertainty or the frame is invalid
+  float y_mm = 0.0f, r_deg = 0.0f;  // valid when located
+  // Calibrated 2x2 position covariance on the surface, mm^2: y, and arc length (R in rad x surface radius).
+  // NaN when not located or the model has no Uncertainty.
+  float cov_yy_mm2 = 0.0f, cov_yr_mm2 = 0.0f, cov_rr_mm2 = 0.0f;
+  float confidence = 0.0f;
+  float common_mode_pm = 0.0f;  // the uniform shift removed this frame (temperature: about 10 pm/C)
+  bool valid = false;
+  bool in_contact = false;      // the force gate is open
+  bool located = false;
+  Reason reason = Reason::kCapturing;
+  std::uint8_t missing = 0;
+};
+
+// Plain counters a service copies into its metrics off the real-time thread.
+struct PipelineCounters {
+  std::uint64_t frames = 0, valid = 0, located = 0, onsets = 0;
+  std::array<std::uint64_t, kReasonCount> invalid{};  // indexed by Reason (kOk stays 0)
+};
+
+template <typename Scalar>
+class Pipeline {
+ public:
+  // Throws InputError when the model does not fit the spec or is malformed.
+  Pipeline(const v1::DecoderModel& model, const patch::PatchSpec& spec, PipelineConfig config,
+           DecoderOptions options = {});
+
+  class Data {
+   public:
+    explicit Data(const Pipeline& p);
+    [[nodiscard]] const BaselineTracker& baseline() const noexcept { return tracker_; }
+    [[nodiscard]] const PipelineCounters& counters() const noexcept { return counters_; }
+
+   private:
+    friend class Pipeline;
+    BaselineTracker tracker_;
+    typename NetworkDecoder<Scalar>::Data net_;
+    PipelineCounters counters_;
+    bool primed_ = false;   // the networks' window holds valid frames
+    int invalid_run_ = 0;   // consecutive invalid frames since the last valid one
+    bool gate_ = false;
+  };
+
+  // One interrogator frame. Real-time safe: no allocation, no lock, no throw.
+  PipelineOutput Process(const Wavelengths& wavelength_nm, std::uint32_t source_flags, Data& data) const noexcept;
+
+  [[nodiscard]] const NetworkDecoder<Scalar>& decoder() const noexcept { return decoder_; }
+  [[nodiscard]] const PipelineConfig& config() const noexcept { return config_; }
+  [[nodiscard]] bool calibrated_uncertainty() const noexcept { return !force_knots_.empty(); }
+
+  // Source flag bit meaning "saturated" (the dataset's kFlagSaturated / the twin's kSaturated).
+  static constexpr std::uint32_t kSourceSaturated = 1u << 0;
+
+ private:
+  [[nodiscard]] Reason CheckRaw(const Wavelengths& wl, std::uint32_t flags) const noexcept;
+  [[nodiscard]] bool InRange(const ShiftsPm& s) const noexcept;
+  [[nodiscard]] float Interp(const std::vector<float>& ys, float x) const noexcept;
+
+  NetworkDecoder<Scalar> decoder_;
+  PipelineConfig config_;
+  std::array<double, kGratings> band_lo_nm_{}, band_hi_nm_{};
+  bool has_range_ = false;
+  std::array<float, kGratings> range_lo_pm_{}, range_hi_pm_{};
+  std::array<float, kGratings> mean_pm_{}, std_pm_{};  // force-net normalisation, for the z check
+  std::vector<float> force_knots_, force_sd_, position_scale_;
+  float position_floor_mm2_ = 0.0f;
+  double mm_per_deg_ = 0.0;
+};
+
+extern template class Pipeline<float>;
+extern template class Pipeline<double>;
+
+// The baseline settings a model was trained with (common mode), at the stream's rate.
+BaselineConfig BaselineFor(const v1::DecoderModel& model, double sample_rate_hz);
+
+}  // namespace ruffini::decode

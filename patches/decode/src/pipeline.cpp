@@ -1,0 +1,188 @@
+#include "ruffini/decode/pipeline.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include "ruffini/decode/model_io.h"
+#include "ruffini/error.h"
+
+namespace ruffini::decode {
+
+std::string_view ReasonName(Reason r) noexcept {
+  switch (r) {
+    case Reason::kOk: return "ok";
+    case Reason::kCapturing: return "capturing";
+    case Reason::kSaturated: return "saturated";
+    case Reason::kNoSignal: return "no_signal";
+    case Reason::kOutOfBand: return "out_of_band";
+    case Reason::kTooManyMissing: return "too_many_missing";
+    case Reason::kBaselineStale: return "baseline_stale";
+    case Reason::kOutOfRange: return "out_of_range";
+    case Reason::kNonFinite: return "non_finite";
+  }
+  return "unknown";
+}
+
+BaselineConfig BaselineFor(const v1::DecoderModel& model, double sample_rate_hz) {
+  BaselineConfig c;
+  c.sample_rate_hz = sample_rate_hz;
+  c.common_mode = model.preprocessing().common_mode_removed();
+  return c;
+}
+
+template <typename Scalar>
+Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& spec, PipelineConfig config,
+                           DecoderOptions options)
+    : decoder_((CheckModelMatchesPatch(m, spec, "pipeline"), m), [&] {
+        options.max_missing = config.max_missing;
+        return std::move(options);
+      }()),
+      config_(config) {
+  if (!(config_.baseline.sample_rate_hz > 0)) throw InputError("pipeline: sample_rate_hz must be > 0");
+  if (config_.baseline.common_mode != m.preprocessing().common_mode_removed()) {
+    throw InputError(std::string("pipeline: the model was trained with common_mode_removed = ") +
+                     (m.preprocessing().common_mode_removed() ? "true" : "false") +
+                     " but the baseline is configured otherwise (use BaselineFor(model, rate))");
+  }
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    const double c = spec.gratings[i].wavelength_nm, half = spec.fibre.band_half_width_nm + config_.band_margin_nm;
+    band_lo_nm_[i] = std::max(c - half, spec.interrogator.window_min_nm);
+    band_hi_nm_[i] = std::min(c + half, spec.interrogator.window_max_nm);
+    mean_pm_[i] = m.force().input().mean(static_cast<int>(i));
+    std_pm_[i] = m.force().input().std(static_cast<int>(i));
+  }
+  if (m.has_input_range()) {
+    has_range_ = true;
+    const auto& r = m.input_range();
+    for (std::size_t i = 0; i < kGratings; ++i) {
+      range_lo_pm_[i] = r.min_shift_pm(static_cast<int>(i)) - r.margin_pm();
+      range_hi_pm_[i] = r.max_shift_pm(static_cast<int>(i)) + r.margin_pm();
+    }
+  }
+  if (m.has_uncertainty()) {
+    const auto& u = m.uncertainty();
+    force_knots_.assign(u.force_knots_n().begin(), u.force_knots_n().end());
+    force_sd_.assign(u.force_sd_n().begin(), u.force_sd_n().end());
+    position_scale_.assign(u.position_scale().begin(), u.position_scale().end());
+    position_floor_mm2_ = u.position_floor_mm2();
+  }
+  mm_per_deg_ = m.surface_radius_mm() * std::numbers::pi / 180.0;
+}
+
+template <typename Scalar>
+Pipeline<Scalar>::Data::Data(const Pipeline& p) : tracker_(p.config_.baseline), net_(p.decoder_) {}
+
+template <typename Scalar>
+Reason Pipeline<Scalar>::CheckRaw(const Wavelengths& wl, std::uint32_t flags) const noexcept {
+  if (flags & kSourceSaturated) return Reason::kSaturated;
+  int missing = 0, dark = 0;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (!std::isfinite(wl[i])) {
+      ++missing;
+    } else if (wl[i] <= 0.0) {
+      ++dark;
+    }
+  }
+  if (missing + dark == static_cast<int>(kGratings)) return Reason::kNoSignal;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (std::isfinite(wl[i]) && (wl[i] < band_lo_nm_[i] || wl[i] > band_hi_nm_[i])) return Reason::kOutOfBand;
+  }
+  if (missing > config_.max_missing) return Reason::kTooManyMissing;
+  return Reason::kOk;
+}
+
+template <typename Scalar>
+bool Pipeline<Scalar>::InRange(const ShiftsPm& s) const noexcept {
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (!std::isfinite(s[i])) continue;  // missing: counted by CheckRaw
+    if (has_range_) {
+      if (s[i] < range_lo_pm_[i] || s[i] > range_hi_pm_[i]) return false;
+    } else if (std::abs(s[i] - mean_pm_[i]) > config_.z_limit * std_pm_[i]) {
+      return false;
+    }
+  }
+  return true;
+}
+
+template <typename Scalar>
+float Pipeline<Scalar>::Interp(const std::vector<float>& ys, float x) const noexcept {
+  const std::size_t n = force_knots_.size();
+  if (x <= force_knots_.front() || n == 1) return ys.front();
+  if (x >= force_knots_.back()) return ys.back();
+  const auto it = std::upper_bound(force_knots_.begin(), force_knots_.end(), x);
+  const auto k = static_cast<std::size_t>(it - force_knots_.begin());
+  const float t = (x - force_knots_[k - 1]) / (force_knots_[k] - force_knots_[k - 1]);
+  return ys[k - 1] + t * (ys[k] - ys[k - 1]);
+}
+
+template <typename Scalar>
+PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t flags, Data& d) const noexcept {
+  constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+  PipelineOutput out;
+  ++d.counters_.frames;
+  auto invalid = [&](Reason r) {
+    out.reason = r;
+    out.force_sd_n = kNaN;
+    out.cov_yy_mm2 = out.cov_yr_mm2 = out.cov_rr_mm2 = kNaN;
+    out.y_mm = out.r_deg = kNaN;
+    ++d.counters_.invalid[static_cast<std::size_t>(r)];
+    ++d.invalid_run_;
+    // A gap longer than the window: the networks start afresh from the next valid frame.
+    if (d.invalid_run_ > decoder_.window()) d.primed_ = false;
+    return out;
+  };
+  // Frames that cannot be peaks of this fibre never reach the baseline (they would move it).
+  const Reason raw = CheckRaw(wl, flags);
+  if (raw != Reason::kOk) return invalid(raw);
+
+  ShiftsPm shift;
+  const bool ready = d.tracker_.Update(wl, shift, d.gate_);
+  out.common_mode_pm = d.tracker_.common_mode_pm();
+  if (!ready) return invalid(Reason::kCapturing);
+  if (d.tracker_.stale()) return invalid(Reason::kBaselineStale);
+  if (!InRange(shift)) return invalid(Reason::kOutOfRange);
+
+  if (!d.primed_) {
+    decoder_.Reset(d.net_, &shift);  // as if this frame had been there for the whole window
+    d.primed_ = true;
+  }
+  const DecodeOutput o = decoder_.Decode(shift, d.net_);
+  out.missing = o.missing;
+  if (!o.valid) return invalid(Reason::kNonFinite);
+  d.invalid_run_ = 0;
+  out.valid = true;
+  out.reason = Reason::kOk;
+  out.force_n = o.force_n;
+  out.in_contact = o.in_contact;
+  if (o.in_contact && !d.gate_) ++d.counters_.onsets;
+  d.gate_ = o.in_contact;
+  ++d.counters_.valid;
+  const bool cal = !force_knots_.empty();
+  out.force_sd_n = cal ? Interp(force_sd_, o.force_n) : kNaN;
+  out.located = o.located;
+  if (!o.located) {
+    out.y_mm = out.r_deg = kNaN;
+    out.cov_yy_mm2 = out.cov_yr_mm2 = out.cov_rr_mm2 = kNaN;
+    return out;
+  }
+  ++d.counters_.located;
+  out.y_mm = o.y_mm;
+  out.r_deg = o.r_deg;
+  out.confidence = o.confidence;
+  if (cal) {
+    const float k = Interp(position_scale_, o.force_n);
+    out.cov_yy_mm2 = k * o.cov_yy_mm2 + position_floor_mm2_;
+    out.cov_yr_mm2 = k * o.cov_ya_mm2;
+    out.cov_rr_mm2 = k * o.cov_aa_mm2 + position_floor_mm2_;
+  } else {
+    out.cov_yy_mm2 = out.cov_yr_mm2 = out.cov_rr_mm2 = kNaN;
+  }
+  return out;
+}
+
+template class Pipeline<float>;
+template class Pipeline<double>;
+
+}  // namespace ruffini::decode

@@ -1,0 +1,87 @@
+#pragma once
+// Decoding a dataset as one continuous stream through decode::Pipeline (the code the decoder service runs:
+// no resets at label boundaries, the baseline tracked throughout), and scoring it as a skeptical reviewer
+// would: force over all frames and above 50 mN, location above 50 mN with every miss scored as a failure,
+// miss and false-contact rates per force bin, invalid frames by reason, and the calibration of the
+// reported uncertainty.
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "ruffini/dataset/dataset.h"
+#include "ruffini/decode/pipeline.h"
+#include "ruffini/patch/spec.h"
+#include "ruffini/stats.h"
+
+namespace ruffini::eval {
+
+// Per frame, aligned with the dataset's frames.
+struct StreamPredictions {
+  std::vector<float> force_n, force_sd_n, y_mm, r_deg, confidence, common_mode_pm;
+  std::vector<float> pos_cov_mm2;  // n x 3: yy, yr, rr (mm^2 on the surface)
+  std::vector<std::uint8_t> valid, located, in_contact, reason, baseline_frozen;
+  decode::PipelineCounters counters;
+  [[nodiscard]] std::size_t size() const { return force_n.size(); }
+};
+
+using ProgressFn = std::function<void(std::uint64_t, std::uint64_t)>;
+
+StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const dataset::Dataset& data,
+                               const ProgressFn& progress = {});
+
+// /pred/force_n, force_sd_n, y_mm, r_deg, confidence, common_mode_pm (f32), pos_cov_mm2 (f32 n x 3),
+// located, valid, in_contact, reason, baseline_frozen (u8; reason codes named in the root attribute
+// `reasons`). Written with the dataset library's HDF5 plumbing.
+void WriteStreamPredictions(const std::string& path, const StreamPredictions& pred, const std::string& model,
+                            const std::string& data);
+
+struct ForceBinRow {
+  double lo_n = 0, hi_n = 0;
+  std::size_t frames = 0;
+  double missed = 0;         // share not located (or invalid)
+  double in_contact = 0;     // share reported in contact (below 20 mN: false contacts)
+  double force_error_mn = 0; // median |error|
+  double location_error_mm = 0;  // median, misses as failures (NaN below 50 mN)
+};
+
+struct StreamMetrics {
+  std::size_t frames = 0;      // frames scored (the mask)
+  std::size_t invalid = 0;
+  std::array<std::size_t, decode::kReasonCount> reasons{};
+  bool has_true_force = false; // the dataset has applied-force labels (twin)
+  // Force error |predicted - reference| (mN): reference = applied force when known, else the load cell.
+  stats::Summary force_all_mn{}, force_above_mn{};       // all scored frames; frames above 50 mN
+  stats::Summary force_all_loadcell_mn{};                 // against the load cell (the paper's labels)
+  // Location above 50 mN: misses (not located, invalid) scored as the random guess would be.
+  stats::Summary location_above_mm{}, location_located_mm{};
+  std::size_t above_frames = 0, above_missed = 0;
+  double miss_rate_above_100mn = 0;
+  std::size_t quiet_frames = 0, false_contacts = 0;       // true force < 20 mN; of them reported in contact
+  double false_contact_rate = 0;
+  std::vector<ForceBinRow> bins;
+  // Uncertainty: share of in-contact frames with |force error| <= 1 / 2 sd; share of located frames above
+  // 50 mN whose Mahalanobis^2 lies within chi-square(2) 68.27 % / 95.45 % (2.30 / 6.18). NaN: uncalibrated.
+  double force_within_1sd = 0, force_within_2sd = 0, position_within_1sd = 0, position_within_2sd = 0;
+  std::size_t force_cov_frames = 0, position_cov_frames = 0;
+  // Baseline: longest frozen stretch and longest press (true force > 20 mN, contiguous), s.
+  double longest_frozen_s = 0, longest_press_s = 0;
+  patch::SurfacePoint guess;   // the random guess's position
+};
+
+// Scores the frames where mask[k] != 0 (empty mask: every frame). guess: the position a random guess names
+// (the training part's median position).
+StreamMetrics ScoreStream(const dataset::Dataset& data, const StreamPredictions& pred, const patch::PatchSpec& spec,
+                          const std::vector<std::uint8_t>& mask, const patch::SurfacePoint& guess);
+
+// Frames of the listed indentations (for scoring a held-out split of the training data).
+std::vector<std::uint8_t> MaskOfIndentations(const dataset::Dataset& data, const std::vector<std::int32_t>& ids);
+
+// One Markdown table row per metric set, for reports: "| name | force all | force > 50 | location | ..."
+std::string StreamMetricsHeader();
+std::string StreamMetricsRow(const std::string& name, const StreamMetrics& m);
+// The per-force-bin table (miss rate, false contacts, errors).
+std::string ForceBinTable(const StreamMetrics& m);
+
+}  // namespace ruffini::eval

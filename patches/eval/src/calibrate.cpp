@@ -1,0 +1,289 @@
+#include "ruffini/eval/calibrate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include "ruffini/decode/network_decoder.h"
+#include "ruffini/decode/pipeline.h"
+#include "ruffini/error.h"
+#include "ruffini/eval/prepared.h"
+#include "ruffini/eval/stream.h"
+#include "ruffini/patch/geometry.h"
+#include "ruffini/stats.h"
+
+namespace ruffini::eval {
+namespace {
+
+constexpr double kChi2Sigma1 = 2.2957, kChi2Sigma2 = 6.1801;
+constexpr double kOneSigma = 0.682689;
+
+double Reference(const dataset::Dataset& d, std::size_t k) {
+  return std::isfinite(d.true_force_n[k]) ? d.true_force_n[k] : d.force_n[k];
+}
+
+decode::PipelineConfig OpenConfig(const v1::DecoderModel& m, const dataset::Dataset& d) {
+  decode::PipelineConfig c;
+  c.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
+  c.z_limit = std::numeric_limits<double>::infinity();  // fitting looks at every frame the nets can take
+  return c;
+}
+
+}  // namespace
+
+dataset::Dataset FirstIndentations(const dataset::Dataset& d, int indentations) {
+  if (indentations <= 0) return d;
+  std::size_t end = d.size();
+  int seen = 0;
+  std::int32_t current = -1;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const std::int32_t id = d.indentation[k];
+    if (id >= 0 && id != current) {
+      if (seen == indentations) {
+        end = k;
+        break;
+      }
+      ++seen;
+      current = id;
+    }
+  }
+  if (seen < indentations) return d;
+  dataset::Dataset out;
+  out.info = d.info;
+  const auto cut = [end](auto v) {
+    v.resize(end);
+    return v;
+  };
+  out.wavelength_nm = cut(d.wavelength_nm);
+  out.t_s = cut(d.t_s);
+  out.serial = cut(d.serial);
+  out.flags = cut(d.flags);
+  out.force_n = cut(d.force_n);
+  out.true_force_n = cut(d.true_force_n);
+  out.y_mm = cut(d.y_mm);
+  out.r_deg = cut(d.r_deg);
+  out.indentation = cut(d.indentation);
+  return out;
+}
+
+v1::InputRange FitInputRange(const v1::DecoderModel& m, const patch::PatchSpec& spec, const dataset::Dataset& d,
+                             double margin_fraction, double margin_pm) {
+  (void)spec;
+  const Prepared p = PrepareFrames(d, decode::BaselineFor(m, d.info.sample_rate_hz));
+  std::array<float, 16> lo, hi;
+  lo.fill(std::numeric_limits<float>::infinity());
+  hi.fill(-std::numeric_limits<float>::infinity());
+  for (const auto& s : p.shift_pm) {
+    for (std::size_t i = 0; i < 16; ++i) {
+      if (!std::isfinite(s[i])) continue;
+      lo[i] = std::min(lo[i], s[i]);
+      hi[i] = std::max(hi[i], s[i]);
+    }
+  }
+  if (m.has_input_range()) {
+    for (std::size_t i = 0; i < 16; ++i) {
+      lo[i] = std::min(lo[i], m.input_range().min_shift_pm(static_cast<int>(i)));
+      hi[i] = std::max(hi[i], m.input_range().max_shift_pm(static_cast<int>(i)));
+    }
+  }
+  double span = 0;
+  for (std::size_t i = 0; i < 16; ++i) {
+    if (!std::isfinite(lo[i])) throw InputError("input range: grating " + std::to_string(i + 1) + " has no valid frame in the data");
+    span = std::max(span, static_cast<double>(hi[i] - lo[i]));
+  }
+  v1::InputRange r;
+  for (std::size_t i = 0; i < 16; ++i) {
+    r.add_min_shift_pm(lo[i]);
+    r.add_max_shift_pm(hi[i]);
+  }
+  r.set_margin_pm(static_cast<float>(margin_fraction * span + margin_pm));
+  r.set_source(d.info.source);
+  return r;
+}
+
+v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
+  // Decode with unit scales so the pipeline hands out the NIP's raw covariance.
+  v1::DecoderModel m = model;
+  m.clear_input_range();
+  auto* raw = m.mutable_uncertainty();
+  raw->Clear();
+  raw->add_force_knots_n(0.0f);
+  raw->add_force_sd_n(1.0f);
+  raw->add_position_scale(1.0f);
+  const decode::Pipeline<float> pipe(m, spec, OpenConfig(m, d));
+  const StreamPredictions p = DecodeStream(pipe, d);
+  const patch::Geometry geo(spec.surface_radius_mm);
+
+  struct ForceRow { double pred, err; };
+  struct PosRow { double pred, dy, da, cyy, cya, caa; };
+  std::vector<ForceRow> fr;
+  std::vector<PosRow> pr;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double ref = Reference(d, k);
+    if (!p.valid[k] || !p.in_contact[k] || !std::isfinite(ref)) continue;
+    fr.push_back({p.force_n[k], std::abs(p.force_n[k] - ref)});
+    if (p.located[k] && ref > 0.05 && std::isfinite(d.y_mm[k])) {
+      pr.push_back({p.force_n[k], p.y_mm[k] - d.y_mm[k], geo.ArcMm(p.r_deg[k] - d.r_deg[k]), p.pos_cov_mm2[3 * k],
+                    p.pos_cov_mm2[3 * k + 1], p.pos_cov_mm2[3 * k + 2]});
+    }
+  }
+  if (fr.size() < 200 || pr.size() < 200) {
+    throw InputError("uncertainty: too few in-contact frames to fit (" + std::to_string(fr.size()) + " force, " +
+                     std::to_string(pr.size()) + " located); calibrate on more indentations");
+  }
+  constexpr float kFloorMm2 = 0.25f;  // (0.5 mm)^2: a fine cell's centre is never exact
+  const auto d2 = [](const PosRow& r, double k, double floor) {
+    const double yy = k * r.cyy + floor, ya = k * r.cya, aa = k * r.caa + floor;
+    const double det = yy * aa - ya * ya;
+    return (aa * r.dy * r.dy - 2 * ya * r.dy * r.da + yy * r.da * r.da) / det;
+  };
+  // Bins of predicted force with at least min_rows frames each (force and position alike).
+  const std::vector<double> edges = {0.0, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 1e9};
+  v1::Uncertainty u;
+  constexpr std::size_t kMinRows = 100;
+  double lo = edges.front();
+  for (std::size_t b = 1; b < edges.size(); ++b) {
+    const double hi = edges[b];
+    std::vector<double> errs, preds;
+    std::vector<const PosRow*> rows;
+    for (const auto& r : fr) {
+      if (r.pred >= lo && r.pred < hi) {
+        errs.push_back(r.err);
+        preds.push_back(r.pred);
+      }
+    }
+    for (const auto& r : pr) {
+      if (r.pred >= lo && r.pred < hi) rows.push_back(&r);
+    }
+    const bool last = b + 1 == edges.size();
+    if ((errs.size() < kMinRows || rows.size() < kMinRows) && !last) continue;  // widen the bin
+    if (errs.size() < kMinRows || rows.size() < kMinRows) {
+      if (u.force_knots_n_size() > 0) break;  // the tail is too thin: the last knot holds beyond it
+      throw InputError("uncertainty: not enough frames per force bin");
+    }
+    const double knot = stats::Median(preds);
+    const double sd = std::max(1e-3, stats::Quantile(errs, kOneSigma));
+    // Position scale: bisection (in log) for the k at which 68.27 % of the bin lies within chi2 2.30.
+    double klo = 1e-4, khi = 1e4;
+    for (int it = 0; it < 60; ++it) {
+      const double k = std::sqrt(klo * khi);
+      std::size_t inside = 0;
+      for (const PosRow* r : rows) inside += d2(*r, k, kFloorMm2) <= kChi2Sigma1;
+      (static_cast<double>(inside) / static_cast<double>(rows.size()) < kOneSigma ? klo : khi) = k;
+    }
+    if (u.force_knots_n_size() > 0 && !(knot > u.force_knots_n(u.force_knots_n_size() - 1))) continue;
+    u.add_force_knots_n(static_cast<float>(knot));
+    u.add_force_sd_n(static_cast<float>(sd));
+    u.add_position_scale(static_cast<float>(std::sqrt(klo * khi)));
+    lo = hi;
+  }
+  u.set_position_floor_mm2(kFloorMm2);
+  u.set_source(d.info.source);
+  // Coverage on the fitting data with the fitted functions (piecewise linear between knots, as the runtime).
+  v1::DecoderModel check = model;
+  check.clear_input_range();
+  *check.mutable_uncertainty() = u;
+  const decode::Pipeline<float> pc(check, spec, OpenConfig(check, d));
+  const StreamPredictions q = DecodeStream(pc, d);
+  const StreamMetrics s = ScoreStream(d, q, spec, {}, {});
+  u.set_force_within_1sd(static_cast<float>(s.force_within_1sd));
+  u.set_force_within_2sd(static_cast<float>(s.force_within_2sd));
+  u.set_position_within_1sd(static_cast<float>(s.position_within_1sd));
+  u.set_position_within_2sd(static_cast<float>(s.position_within_2sd));
+  (void)kChi2Sigma2;
+  return u;
+}
+
+void ApplyGains(v1::DecoderModel& m, const std::vector<float>& g) {
+  if (g.size() != 16) throw InputError("gains: expected 16, got " + std::to_string(g.size()));
+  auto fold = [&](v1::Normalization* n) {
+    for (int i = 0; i < 16; ++i) {
+      const float gi = g[static_cast<std::size_t>(i)];
+      n->set_mean(i, n->mean(i) / gi);
+      n->set_std(i, n->std(i) / gi);
+    }
+  };
+  fold(m.mutable_force()->mutable_input());
+  for (auto& l : *m.mutable_location()) {
+    // UNIT nets see the pattern over its norm: a gain changes the pattern too, so it folds the same way
+    // up to the norm's change, which the floor absorbs; RAW nets fold exactly.
+    fold(l.mutable_input());
+  }
+}
+
+GainFit FitGains(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d, int sweeps,
+                 const GainProgress& progress) {
+  const Prepared p = PrepareFrames(d, decode::BaselineFor(model, d.info.sample_rate_hz));
+  const int w = static_cast<int>(model.force().window());
+  // A subsample of indentation frames, each with its window (clamped at the indentation's first frame).
+  std::vector<std::size_t> frames;
+  for (std::size_t k = 0; k < p.size(); ++k) {
+    if (p.indentation[k] >= 0 && std::isfinite(p.force_n[k])) frames.push_back(k);
+  }
+  if (frames.size() < 500) throw InputError("gain fit: too few indentation frames (" + std::to_string(frames.size()) + ")");
+  std::mt19937_64 rng(7);
+  std::shuffle(frames.begin(), frames.end(), rng);
+  frames.resize(std::min<std::size_t>(frames.size(), 6000));
+  std::vector<std::size_t> start(p.size(), 0);
+  for (std::size_t r = 0; r < p.ranges.size(); ++r) {
+    for (std::size_t k = p.ranges[r].first; k < p.ranges[r].second; ++k) start[k] = p.ranges[r].first;
+  }
+  const patch::Geometry geo(spec.surface_radius_mm);
+  GainFit fit;
+  fit.gain.assign(16, 1.0f);
+  std::vector<float> window(static_cast<std::size_t>(w) * 16);
+  std::vector<float> probs;
+  auto objective = [&](const std::vector<float>& g) {
+    v1::DecoderModel m = model;
+    ApplyGains(m, g);
+    const decode::NetworkDecoder<float> dec(m);
+    decode::NetworkDecoder<float>::Data data(dec);
+    std::vector<double> fe, le;
+    for (std::size_t k : frames) {
+      for (int t = 0; t < w; ++t) {
+        const std::size_t src = std::max<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(start[k]), static_cast<std::ptrdiff_t>(k) - (w - 1 - t));
+        for (std::size_t i = 0; i < 16; ++i) {
+          const float v = p.shift_pm[src][i];
+          window[static_cast<std::size_t>(t) * 16 + i] = std::isfinite(v) ? v : m.force().input().mean(static_cast<int>(i));
+        }
+      }
+      const float f = dec.ForceOnWindow(window.data(), data);
+      fe.push_back(std::abs(f - p.force_n[k]) * 1e3);
+      if (p.force_n[k] > 0.05f) {
+        dec.Probabilities(p.shift_pm[k], data, probs);
+        const decode::Nip::Estimate e = dec.nip().Fuse(probs, spec.surface_radius_mm);
+        if (e.ok) le.push_back(geo.SurfaceDistanceMm({e.y_mm, e.r_deg}, {p.y_mm[k], p.r_deg[k]}));
+      }
+    }
+    ++fit.evaluations;
+    return stats::Median(fe) + 10.0 * stats::Median(le);
+  };
+  double best = objective(fit.gain);
+  fit.before = best;
+  for (int s = 0; s < sweeps; ++s) {
+    const float step0 = s == 0 ? 0.15f : 0.05f;
+    for (std::size_t i = 0; i < 16; ++i) {
+      for (float step = step0; step > 0.01f; step *= 0.5f) {
+        bool moved = false;
+        for (float dir : {1.0f, -1.0f}) {
+          std::vector<float> g = fit.gain;
+          g[i] = std::clamp(g[i] + dir * step, 0.6f, 1.6f);
+          const double v = objective(g);
+          if (v < best) {
+            best = v;
+            fit.gain = g;
+            moved = true;
+            break;
+          }
+        }
+        if (moved) step *= 2.0f;  // try the same step again
+      }
+    }
+    if (progress) progress(s + 1, sweeps, best);
+  }
+  fit.after = best;
+  return fit;
+}
+
+}  // namespace ruffini::eval

@@ -1,0 +1,251 @@
+#include "ruffini/eval/stream.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <set>
+#include <sstream>
+
+#include "ruffini/error.h"
+#include "ruffini/patch/geometry.h"
+
+namespace ruffini::eval {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr double kGateN = 0.05;     // the paper's gate: location is scored above it
+constexpr double kQuietN = 0.02;    // below this true force a reported contact is a false contact
+// chi-square(2) quantiles of the 1- and 2-sigma probabilities (68.27 %, 95.45 %): -2 ln(1 - p).
+constexpr double kChi2Sigma1 = 2.2957, kChi2Sigma2 = 6.1801;
+
+std::string F(const char* fmt, double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, fmt, v);
+  return b;
+}
+
+}  // namespace
+
+StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const dataset::Dataset& d,
+                               const ProgressFn& progress) {
+  StreamPredictions out;
+  const std::size_t n = d.size();
+  out.force_n.resize(n);
+  out.force_sd_n.resize(n);
+  out.y_mm.resize(n);
+  out.r_deg.resize(n);
+  out.confidence.resize(n);
+  out.common_mode_pm.resize(n);
+  out.pos_cov_mm2.resize(3 * n);
+  out.valid.resize(n);
+  out.located.resize(n);
+  out.in_contact.resize(n);
+  out.reason.resize(n);
+  out.baseline_frozen.resize(n);
+  decode::Pipeline<float>::Data data(pipeline);
+  for (std::size_t k = 0; k < n; ++k) {
+    const decode::PipelineOutput o = pipeline.Process(d.wavelength_nm[k], d.flags[k], data);
+    out.force_n[k] = o.force_n;
+    out.force_sd_n[k] = o.force_sd_n;
+    out.y_mm[k] = o.y_mm;
+    out.r_deg[k] = o.r_deg;
+    out.confidence[k] = o.confidence;
+    out.common_mode_pm[k] = o.common_mode_pm;
+    out.pos_cov_mm2[3 * k] = o.cov_yy_mm2;
+    out.pos_cov_mm2[3 * k + 1] = o.cov_yr_mm2;
+    out.pos_cov_mm2[3 * k + 2] = o.cov_rr_mm2;
+    out.valid[k] = o.valid;
+    out.located[k] = o.located;
+    out.in_contact[k] = o.in_contact;
+    out.reason[k] = static_cast<std::uint8_t>(o.reason);
+    out.baseline_frozen[k] = data.baseline().state() == decode::BaselineTracker::State::kFrozen;
+    if (progress && (k % 65536 == 0 || k + 1 == n)) progress(k + 1, n);
+  }
+  out.counters = data.counters();
+  return out;
+}
+
+void WriteStreamPredictions(const std::string& path, const StreamPredictions& p, const std::string& model,
+                            const std::string& data) {
+  using dataset::Column;
+  const std::size_t n = p.size();
+  const Column cols[] = {
+      {"force_n", Column::Type::kF32, n, 1, p.force_n.data()},
+      {"force_sd_n", Column::Type::kF32, n, 1, p.force_sd_n.data()},
+      {"y_mm", Column::Type::kF32, n, 1, p.y_mm.data()},
+      {"r_deg", Column::Type::kF32, n, 1, p.r_deg.data()},
+      {"pos_cov_mm2", Column::Type::kF32, n, 3, p.pos_cov_mm2.data()},
+      {"confidence", Column::Type::kF32, n, 1, p.confidence.data()},
+      {"common_mode_pm", Column::Type::kF32, n, 1, p.common_mode_pm.data()},
+      {"located", Column::Type::kU8, n, 1, p.located.data()},
+      {"valid", Column::Type::kU8, n, 1, p.valid.data()},
+      {"in_contact", Column::Type::kU8, n, 1, p.in_contact.data()},
+      {"reason", Column::Type::kU8, n, 1, p.reason.data()},
+      {"baseline_frozen", Column::Type::kU8, n, 1, p.baseline_frozen.data()},
+  };
+  std::string reasons;
+  for (std::size_t r = 0; r < decode::kReasonCount; ++r) {
+    if (!reasons.empty()) reasons += ", ";
+    reasons += std::to_string(r) + " = " + std::string(decode::ReasonName(static_cast<decode::Reason>(r)));
+  }
+  dataset::WriteColumns(path, "pred", cols,
+                        {{"format", "ruffini.predictions"}, {"model", model}, {"data", data}, {"reasons", reasons},
+                         {"pos_cov_mm2", "per frame yy, yr, rr in mm^2 on the surface (r as arc length)"}});
+}
+
+std::vector<std::uint8_t> MaskOfIndentations(const dataset::Dataset& d, const std::vector<std::int32_t>& ids) {
+  const std::set<std::int32_t> s(ids.begin(), ids.end());
+  std::vector<std::uint8_t> m(d.size(), 0);
+  for (std::size_t k = 0; k < d.size(); ++k) m[k] = d.indentation[k] >= 0 && s.count(d.indentation[k]) ? 1 : 0;
+  return m;
+}
+
+StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p, const patch::PatchSpec& spec,
+                          const std::vector<std::uint8_t>& mask, const patch::SurfacePoint& guess) {
+  if (p.size() != d.size()) {
+    throw InputError("predictions have " + std::to_string(p.size()) + " frames, the dataset " + std::to_string(d.size()));
+  }
+  StreamMetrics m;
+  m.guess = guess;
+  const patch::Geometry geo(spec.surface_radius_mm);
+  const std::vector<double> edges = {0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 1e9};
+  std::vector<std::vector<double>> bin_f(edges.size() - 1), bin_l(edges.size() - 1);
+  std::vector<std::size_t> bin_n(edges.size() - 1), bin_miss(edges.size() - 1), bin_contact(edges.size() - 1);
+  std::vector<double> f_all, f_above, f_cell, l_above, l_located;
+  std::size_t above100 = 0, missed100 = 0;
+  std::size_t f1 = 0, f2 = 0, p1 = 0, p2 = 0;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    if (!mask.empty() && !mask[k]) continue;
+    ++m.frames;
+    const bool valid = p.valid[k] != 0;
+    if (!valid) {
+      ++m.invalid;
+      ++m.reasons[std::min<std::size_t>(p.reason[k], decode::kReasonCount - 1)];
+    }
+    const bool has_true = std::isfinite(d.true_force_n[k]);
+    m.has_true_force = m.has_true_force || has_true;
+    const double ref = has_true ? d.true_force_n[k] : d.force_n[k];
+    if (!std::isfinite(ref)) continue;
+    // An invalid frame reports no force (0): scored as such.
+    const double pred = valid ? p.force_n[k] : 0.0;
+    const double fe = std::abs(pred - ref) * 1e3;
+    f_all.push_back(fe);
+    if (std::isfinite(d.force_n[k])) f_cell.push_back(std::abs(pred - d.force_n[k]) * 1e3);
+    const bool located = valid && p.located[k];
+    const auto bin = static_cast<std::size_t>(std::upper_bound(edges.begin(), edges.end(), ref) - edges.begin()) - 1;
+    const std::size_t b = std::min(bin, edges.size() - 2);
+    ++bin_n[b];
+    bin_f[b].push_back(fe);
+    if (valid && p.in_contact[k]) ++bin_contact[b];
+    if (!located) ++bin_miss[b];
+    if (ref < kQuietN) {
+      ++m.quiet_frames;
+      if (valid && p.in_contact[k]) ++m.false_contacts;
+    }
+    if (valid && p.in_contact[k] && std::isfinite(p.force_sd_n[k])) {
+      ++m.force_cov_frames;
+      const double z = std::abs(pred - ref) / p.force_sd_n[k];
+      f1 += z <= 1.0;
+      f2 += z <= 2.0;
+    }
+    if (ref > kGateN && std::isfinite(d.y_mm[k]) && std::isfinite(d.r_deg[k])) {
+      f_above.push_back(fe);
+      ++m.above_frames;
+      const patch::SurfacePoint truth{d.y_mm[k], d.r_deg[k]};
+      double le;
+      if (located) {
+        le = geo.SurfaceDistanceMm({p.y_mm[k], p.r_deg[k]}, truth);
+        l_located.push_back(le);
+        const double cyy = p.pos_cov_mm2[3 * k], cyr = p.pos_cov_mm2[3 * k + 1], crr = p.pos_cov_mm2[3 * k + 2];
+        const double det = cyy * crr - cyr * cyr;
+        if (std::isfinite(det) && det > 0 && cyy > 0) {
+          const double dy = p.y_mm[k] - truth.y_mm, da = geo.ArcMm(p.r_deg[k] - truth.r_deg);
+          const double d2 = (crr * dy * dy - 2 * cyr * dy * da + cyy * da * da) / det;
+          ++m.position_cov_frames;
+          p1 += d2 <= kChi2Sigma1;
+          p2 += d2 <= kChi2Sigma2;
+        }
+      } else {
+        le = geo.SurfaceDistanceMm(guess, truth);
+        ++m.above_missed;
+      }
+      l_above.push_back(le);
+      bin_l[b].push_back(le);
+      if (ref > 0.1) {
+        ++above100;
+        missed100 += !located;
+      }
+    }
+  }
+  // Longest frozen stretch and longest press over the whole stream (the baseline is a property of the stream).
+  {
+    const double dt = d.size() > 1 ? (d.t_s.back() - d.t_s.front()) / static_cast<double>(d.size() - 1) : 0.0;
+    std::size_t run_f = 0, best_f = 0, run_p = 0, best_p = 0;
+    for (std::size_t k = 0; k < d.size(); ++k) {
+      run_f = p.baseline_frozen[k] ? run_f + 1 : 0;
+      best_f = std::max(best_f, run_f);
+      const double ref = std::isfinite(d.true_force_n[k]) ? d.true_force_n[k] : d.force_n[k];
+      run_p = std::isfinite(ref) && ref > kQuietN ? run_p + 1 : 0;
+      best_p = std::max(best_p, run_p);
+    }
+    m.longest_frozen_s = static_cast<double>(best_f) * dt;
+    m.longest_press_s = static_cast<double>(best_p) * dt;
+  }
+  m.force_all_mn = stats::Summarize(f_all);
+  m.force_above_mn = stats::Summarize(f_above);
+  m.force_all_loadcell_mn = stats::Summarize(f_cell);
+  m.location_above_mm = stats::Summarize(l_above);
+  m.location_located_mm = stats::Summarize(l_located);
+  m.miss_rate_above_100mn = above100 ? static_cast<double>(missed100) / static_cast<double>(above100) : kNaN;
+  m.false_contact_rate = m.quiet_frames ? static_cast<double>(m.false_contacts) / static_cast<double>(m.quiet_frames) : kNaN;
+  const auto share = [](std::size_t a, std::size_t b) { return b ? static_cast<double>(a) / static_cast<double>(b) : kNaN; };
+  m.force_within_1sd = share(f1, m.force_cov_frames);
+  m.force_within_2sd = share(f2, m.force_cov_frames);
+  m.position_within_1sd = share(p1, m.position_cov_frames);
+  m.position_within_2sd = share(p2, m.position_cov_frames);
+  for (std::size_t b = 0; b + 1 < edges.size(); ++b) {
+    ForceBinRow r;
+    r.lo_n = edges[b];
+    r.hi_n = edges[b + 1];
+    r.frames = bin_n[b];
+    r.missed = share(bin_miss[b], bin_n[b]);
+    r.in_contact = share(bin_contact[b], bin_n[b]);
+    r.force_error_mn = stats::Median(bin_f[b]);
+    r.location_error_mm = stats::Median(bin_l[b]);
+    m.bins.push_back(r);
+  }
+  return m;
+}
+
+std::string StreamMetricsHeader() {
+  return "| data | frames | force, all frames: median (IQR) mN | force > 50 mN | location > 50 mN, misses as failures: "
+         "median (IQR) mm | located only | missed > 50 mN | missed > 100 mN | false contacts (< 20 mN) | invalid |\n"
+         "|---|---|---|---|---|---|---|---|---|---|\n";
+}
+
+std::string StreamMetricsRow(const std::string& name, const StreamMetrics& m) {
+  std::ostringstream o;
+  const auto s = [](const stats::Summary& v, const char* fmt) { return F(fmt, v.median) + " (" + F(fmt, v.iqr()) + ")"; };
+  o << "| " << name << " | " << m.frames << " | " << s(m.force_all_mn, "%.1f") << " | " << s(m.force_above_mn, "%.1f") << " | "
+    << s(m.location_above_mm, "%.2f") << " | " << s(m.location_located_mm, "%.2f") << " | "
+    << F("%.1f %%", 100.0 * static_cast<double>(m.above_missed) / std::max<double>(1.0, static_cast<double>(m.above_frames)))
+    << " | " << F("%.2f %%", 100.0 * m.miss_rate_above_100mn) << " | "
+    << F("%.3f %%", 100.0 * m.false_contact_rate) << " (" << m.false_contacts << " of " << m.quiet_frames << ") | "
+    << m.invalid << " |\n";
+  return o.str();
+}
+
+std::string ForceBinTable(const StreamMetrics& m) {
+  std::ostringstream o;
+  o << "| true force (N) | frames | reported in contact | not located | force error, median mN | location error (misses as failures), median mm |\n"
+       "|---|---|---|---|---|---|\n";
+  for (const auto& r : m.bins) {
+    o << "| " << F("%.2f", r.lo_n) << " - " << (r.hi_n > 1e6 ? std::string("...") : F("%.2f", r.hi_n)) << " | " << r.frames << " | "
+      << F("%.3f %%", 100 * r.in_contact) << " | " << F("%.2f %%", 100 * r.missed) << " | " << F("%.1f", r.force_error_mn) << " | "
+      << (std::isfinite(r.location_error_mm) ? F("%.2f", r.location_error_mm) : std::string("-")) << " |\n";
+  }
+  return o.str();
+}
+
+}  // namespace ruffini::eval

@@ -1,0 +1,247 @@
+// decode::Pipeline: every kind of bad input gets its named reason (never a force), the networks are not
+// poisoned by it, uniform drift never reaches them, and the uncertainty is the model's calibration.
+#include "ruffini/decode/pipeline.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <functional>
+#include <set>
+#include <string>
+#include <tuple>
+
+#include "ruffini/error.h"
+#include "ruffini/patch/spec_loader.h"
+#include "synthetic_model.h"
+
+namespace ruffini::decode {
+namespace {
+
+const patch::PatchSpec& Spec() {
+  static const patch::PatchSpec s = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
+  return s;
+}
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+Wavelengths Nominal() {
+  Wavelengths wl;
+  for (std::size_t i = 0; i < 16; ++i) wl[i] = Spec().gratings[i].wavelength_nm;
+  return wl;
+}
+
+// A pipeline around the synthetic model (force = 0.001 (max(s[0..7], 0) + max(s[8..15], 0)) N) that has
+// captured its baseline on the nominal wavelengths.
+// The synthetic model's std is 1 pm, so the default z limit (40) would make every press out of range:
+// fixtures lift it unless a test sets its own.
+PipelineConfig Open() {
+  PipelineConfig c;
+  c.z_limit = 1e6;
+  return c;
+}
+
+PipelineConfig ConfigFor(const v1::DecoderModel& m, PipelineConfig cfg) {
+  cfg.baseline.common_mode = m.preprocessing().common_mode_removed();
+  cfg.baseline.sample_rate_hz = 100.0;
+  return cfg;
+}
+
+struct Fixture {
+  explicit Fixture(v1::DecoderModel model, PipelineConfig cfg = Open())
+      : m(std::move(model)), pipe(m, Spec(), ConfigFor(m, cfg)), data(pipe) {
+    for (int k = 0; k < pipe.config().baseline.capture_frames; ++k) {
+      const auto o = pipe.Process(Nominal(), 0, data);
+      EXPECT_EQ(o.reason, Reason::kCapturing);
+    }
+  }
+  PipelineOutput Press(float pm_on_grating_4, std::uint32_t flags = 0) {
+    Wavelengths wl = Nominal();
+    wl[3] += pm_on_grating_4 * 1e-3;
+    return pipe.Process(wl, flags, data);
+  }
+  v1::DecoderModel m;
+  Pipeline<float> pipe;
+  Pipeline<float>::Data data;
+};
+
+v1::DecoderModel WithRange(v1::DecoderModel m, float lo, float hi, float margin) {
+  auto* r = m.mutable_input_range();
+  for (int i = 0; i < 16; ++i) {
+    r->add_min_shift_pm(lo);
+    r->add_max_shift_pm(hi);
+  }
+  r->set_margin_pm(margin);
+  return m;
+}
+
+TEST(PipelineTest, DecodesAPressAfterCapture) {
+  Fixture f(testing::SyntheticModel(Spec()));
+  const auto o = f.Press(120.0f);
+  EXPECT_TRUE(o.valid);
+  EXPECT_EQ(o.reason, Reason::kOk);
+  EXPECT_NEAR(o.force_n, 0.120f, 1e-4f);
+  EXPECT_TRUE(o.in_contact);
+  EXPECT_TRUE(o.located);
+  EXPECT_EQ(f.data.counters().frames, 101u);
+  EXPECT_EQ(f.data.counters().invalid[static_cast<std::size_t>(Reason::kCapturing)], 100u);
+  EXPECT_EQ(f.data.counters().onsets, 1u);
+}
+
+// The bad-input table: each row is a frame a real interrogator or a broken fibre can send.
+TEST(PipelineTest, BadInputGetsItsReasonNeverAForce) {
+  struct Row {
+    std::string what;
+    std::function<void(Wavelengths&, std::uint32_t&)> make;
+    Reason reason;
+  };
+  const double one_band_up = Spec().gratings[4].wavelength_nm - Spec().gratings[3].wavelength_nm;
+  const std::vector<Row> table = {
+      {"saturated flag", [](Wavelengths&, std::uint32_t& fl) { fl = Pipeline<float>::kSourceSaturated; }, Reason::kSaturated},
+      {"all peaks at 0 nm", [](Wavelengths& w, std::uint32_t&) { w.fill(0.0); }, Reason::kNoSignal},
+      {"all peaks missing", [](Wavelengths& w, std::uint32_t&) { w.fill(kNaN); }, Reason::kNoSignal},
+      {"one grating +5 nm", [](Wavelengths& w, std::uint32_t&) { w[3] += 5.0; }, Reason::kOutOfBand},
+      {"one grating -1.3 nm", [](Wavelengths& w, std::uint32_t&) { w[3] -= 1.3; }, Reason::kOutOfBand},
+      {"a grating reads its neighbour's peak", [=](Wavelengths& w, std::uint32_t&) { w[3] += one_band_up; }, Reason::kOutOfBand},
+      {"one peak at +inf", [](Wavelengths& w, std::uint32_t&) { w[3] = std::numeric_limits<double>::infinity(); }, Reason::kOk},
+      {"four peaks missing", [](Wavelengths& w, std::uint32_t&) { w[1] = w[5] = w[9] = w[13] = kNaN; }, Reason::kTooManyMissing},
+      {"one grating +1.1 nm (in band, beyond the known range)", [](Wavelengths& w, std::uint32_t&) { w[3] += 1.1; }, Reason::kOutOfRange},
+      {"one grating -0.4 nm (beyond the known range)", [](Wavelengths& w, std::uint32_t&) { w[3] -= 0.4; }, Reason::kOutOfRange},
+  };
+  for (const bool with_range : {true, false}) {
+    auto model = testing::SyntheticModel(Spec());
+    if (with_range) model = WithRange(model, -20.0f, 150.0f, 80.0f);  // known: -100..230 pm
+    PipelineConfig cfg;
+    cfg.z_limit = 300.0;  // without a range: |shift| / std (1 pm here) above 300 is out of range
+    Fixture f(model, cfg);
+    for (const Row& row : table) {
+      SCOPED_TRACE(row.what + (with_range ? " (model with an input range)" : " (z-score limit)"));
+      Wavelengths wl = Nominal();
+      std::uint32_t flags = 0;
+      row.make(wl, flags);
+      const auto before = f.data.counters();
+      const auto o = f.pipe.Process(wl, flags, f.data);
+      if (row.reason == Reason::kOk) {  // one non-finite peak is a missing peak: decoded from the others
+        EXPECT_TRUE(o.valid);
+        EXPECT_EQ(o.missing, 1);
+        EXPECT_NEAR(o.force_n, 0.0f, 1e-6f);
+        continue;
+      }
+      EXPECT_FALSE(o.valid);
+      EXPECT_EQ(o.reason, row.reason) << "got " << ReasonName(o.reason);
+      EXPECT_EQ(o.force_n, 0.0f);
+      EXPECT_FALSE(o.in_contact);
+      EXPECT_FALSE(o.located);
+      const auto r = static_cast<std::size_t>(row.reason);
+      EXPECT_EQ(f.data.counters().invalid[r], before.invalid[r] + 1);
+    }
+    // Nothing of that reached the networks or the baseline: a real press decodes exactly.
+    const auto o = f.Press(120.0f);
+    EXPECT_TRUE(o.valid);
+    EXPECT_NEAR(o.force_n, 0.120f, 1e-4f);
+    for (std::size_t i = 0; i < 16; ++i) EXPECT_NEAR(f.data.baseline().baseline_nm()[i], Nominal()[i], 1e-9);
+  }
+}
+
+TEST(PipelineTest, ReasonNamesAreDistinct) {
+  std::set<std::string> names;
+  for (std::size_t r = 0; r < kReasonCount; ++r) names.insert(std::string(ReasonName(static_cast<Reason>(r))));
+  EXPECT_EQ(names.size(), kReasonCount);
+  EXPECT_EQ(ReasonName(Reason::kOutOfBand), "out_of_band");
+}
+
+TEST(PipelineTest, StaleBaselineIsInvalidAndThePressIsNotEaten) {
+  PipelineConfig cfg = Open();
+  cfg.baseline.max_frozen_s = 5.0;
+  Fixture f(testing::SyntheticModel(Spec()), cfg);
+  PipelineOutput o;
+  for (int k = 0; k < 499; ++k) o = f.Press(120.0f);
+  EXPECT_TRUE(o.valid);
+  for (int k = 0; k < 3; ++k) o = f.Press(120.0f);
+  EXPECT_FALSE(o.valid);
+  EXPECT_EQ(o.reason, Reason::kBaselineStale);
+}
+
+TEST(PipelineTest, UniformDriftNeverReachesACommonModeModel) {
+  auto m = testing::SyntheticModel(Spec());
+  m.mutable_preprocessing()->set_common_mode_removed(true);
+  Fixture f(m);
+  // +-10 pm on every grating (a 1 C step) with and without a press: the force is the press alone.
+  for (const double drift_pm : {-10.0, -0.25, 10.0}) {
+    Wavelengths wl = Nominal();
+    for (auto& w : wl) w += drift_pm * 1e-3;
+    const auto idle = f.pipe.Process(wl, 0, f.data);
+    EXPECT_TRUE(idle.valid);
+    EXPECT_NEAR(idle.force_n, 0.0f, 1e-4f) << drift_pm;
+    EXPECT_FALSE(idle.in_contact);
+    wl[3] += 0.120;
+    const auto pressed = f.pipe.Process(wl, 0, f.data);
+    EXPECT_NEAR(pressed.force_n, 0.120f, 2e-3f) << drift_pm;
+  }
+  // A raw model reads the same uniform +10 pm as a force: the reason the shipped models remove it.
+  Fixture raw(testing::SyntheticModel(Spec()));
+  Wavelengths wl = Nominal();
+  for (auto& w : wl) w += 0.010;
+  EXPECT_NEAR(raw.pipe.Process(wl, 0, raw.data).force_n, 0.020f, 1e-3f);
+}
+
+TEST(PipelineTest, MismatchedPreprocessingIsRefused) {
+  auto m = testing::SyntheticModel(Spec());
+  m.mutable_preprocessing()->set_common_mode_removed(true);
+  PipelineConfig cfg;
+  cfg.baseline.common_mode = false;
+  try {
+    Pipeline<float> p(m, Spec(), cfg);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("common_mode_removed = true"), std::string::npos) << e.what();
+  }
+}
+
+TEST(PipelineTest, UncertaintyIsTheModelsCalibration) {
+  auto m = testing::SyntheticModel(Spec());
+  auto* u = m.mutable_uncertainty();
+  for (auto [knot, sd, scale] : {std::tuple{0.1f, 0.02f, 2.0f}, {1.0f, 0.1f, 4.0f}}) {
+    u->add_force_knots_n(knot);
+    u->add_force_sd_n(sd);
+    u->add_position_scale(scale);
+  }
+  u->set_position_floor_mm2(0.25f);
+  Fixture f(m);
+  const auto at = [&](float pm) { return f.Press(pm); };
+  EXPECT_NEAR(at(55.0f).force_sd_n, 0.02f, 1e-6f);           // below the first knot: clamped
+  EXPECT_NEAR(at(550.0f).force_sd_n, 0.02f + 0.5f * 0.08f, 1e-4f);  // halfway: linear
+  const auto o = at(1100.0f);
+  EXPECT_NEAR(o.force_sd_n, 0.1f, 1e-6f);                     // beyond the last: clamped
+  ASSERT_TRUE(o.located);
+  // Position covariance: scale x the NIP's raw covariance + floor; symmetric positive definite.
+  EXPECT_GT(o.cov_yy_mm2, 0.25f);
+  EXPECT_GT(o.cov_rr_mm2, 0.25f);
+  EXPECT_GT(o.cov_yy_mm2 * o.cov_rr_mm2 - o.cov_yr_mm2 * o.cov_yr_mm2, 0.0f);
+  // Without a calibration: NaN, and the pipeline says so.
+  Fixture g(testing::SyntheticModel(Spec()));
+  EXPECT_FALSE(g.pipe.calibrated_uncertainty());
+  const auto n = g.Press(500.0f);
+  EXPECT_TRUE(std::isnan(n.force_sd_n) && std::isnan(n.cov_yy_mm2));
+}
+
+TEST(PipelineTest, ALongGapRestartsTheWindow) {
+  // W = 8: after more than W invalid frames the window starts again from the next valid frame, so the
+  // force is that frame's, not a mix with frames from before the gap.
+  // The synthetic CNN reads the newest frame of its window; rewire it to read the oldest.
+  auto m = testing::SyntheticModel(Spec(), 8);
+  auto* w = m.mutable_force()->mutable_conv(0)->mutable_weight();
+  w->set_values((0 * 8 + 7) * 16 + 7, 0.0f);
+  w->set_values((0 * 8 + 0) * 16 + 7, 1.0f);
+  Fixture f(m);
+  for (int k = 0; k < 20; ++k) f.Press(300.0f);
+  EXPECT_NEAR(f.Press(0.0f).force_n, 0.300f, 1e-4f);  // the oldest frame of the window still pressed
+  Wavelengths dark;
+  dark.fill(0.0);
+  for (int k = 0; k < 9; ++k) EXPECT_EQ(f.pipe.Process(dark, 0, f.data).reason, Reason::kNoSignal);
+  const auto o = f.Press(0.0f);
+  EXPECT_TRUE(o.valid);
+  EXPECT_NEAR(o.force_n, 0.0f, 1e-4f);
+}
+
+}  // namespace
+}  // namespace ruffini::decode
