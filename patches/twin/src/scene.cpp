@@ -92,7 +92,7 @@ TwinEffects ReadEffects(YamlReader& e) {
         v->Fail("terms", "must list 1 to " + std::to_string(ViscoelasticFilter::kMaxTerms) + " Prony terms ({g, tau_s})");
       }
       if (ve.total_creep() > 1.0) {
-        v->Fail("terms", "add up to a creep of " + FormatNumber(ve.total_creep()) + " (sum of g); at most 1 is allowed");
+        v->Fail("terms", "must add up to a creep of at most 1 (the sum of g is " + FormatNumber(ve.total_creep()) + ")");
       }
     }
     v->Finish();
