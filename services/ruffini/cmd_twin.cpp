@@ -63,17 +63,22 @@ void RegisterSimulate(CLI::App& app) {
     std::string out;
     int compression = 0;
     double step_mm = 2.0;
+    double duration_s = twin::FieldProtocol{}.duration_s;
+    double rate_hz = twin::FieldProtocol{}.rate_hz;
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("simulate", "Run a protocol on the skin twin and write an HDF5 dataset");
   AddSceneOptions(cmd, args->scene);
-  cmd->add_option("--protocol", args->protocol, "paper | vonfrey | receptive-field")
-      ->check(CLI::IsMember({"paper", "vonfrey", "receptive-field"}))
+  cmd->add_option("--protocol", args->protocol, "paper | vonfrey | receptive-field | field")
+      ->check(CLI::IsMember({"paper", "vonfrey", "receptive-field", "field"}))
       ->capture_default_str();
   cmd->add_option("--seed", args->seed, "Seed: the same seed gives a bit-identical file")
       ->check(CLI::NonNegativeNumber)->capture_default_str();
   cmd->add_option("--indentations", args->indentations, "paper: number of indentations (default 2700)")
       ->check(CLI::Range(1, 1000000));
+  cmd->add_option("--duration-s", args->duration_s, "field: length of the recording")
+      ->check(CLI::Range(1.0, 1e7))->capture_default_str();
+  cmd->add_option("--rate-hz", args->rate_hz, "field: frame rate")->check(CLI::Range(1.0, 100000.0))->capture_default_str();
   cmd->add_option("--step-mm", args->step_mm, "receptive-field: grid step")->check(CLI::Range(0.2, 50.0))->capture_default_str();
   cmd->add_option("--compression", args->compression, "0 none, 1..9 shuffle+deflate")->check(CLI::Range(0, 9))->capture_default_str();
   cmd->add_option("--out", args->out, "Output dataset (.h5)")->required();
@@ -101,6 +106,15 @@ void RegisterSimulate(CLI::App& app) {
       rate = p.rate_hz;
       open(rate);
       run = twin::RunVonFrey(*twin, p, args->seed, sink, Bar(bar, "stimulations"));
+    } else if (args->protocol == "field") {
+      twin::FieldProtocol p;
+      p.duration_s = args->duration_s;
+      p.rate_hz = args->rate_hz;
+      p.first_rest_s = std::min(p.first_rest_s, p.duration_s);
+      p.Validate();
+      rate = p.rate_hz;
+      open(rate);
+      run = twin::RunField(*twin, scene, p, args->seed, sink, Bar(bar, "seconds"));
     } else {
       twin::ReceptiveFieldProtocol p;
       p.step_mm = args->step_mm;

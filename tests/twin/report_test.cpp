@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -75,21 +77,54 @@ int Neighbours(const Shifts& s, std::size_t self) {
   return n;
 }
 
-TEST(Calibration, T3CrossTalk) {
+// a + b + c without GCC 12's false -Wrestrict on `"literal" + std::string`.
+std::string Cat(const std::string& a, const std::string& b, const std::string& c = "") {
+  std::string s(a);
+  s.append(b).append(c);
+  return s;
+}
+
+// The line of the text report that starts with `what`.
+std::string ReportLine(const std::string& text, const std::string& what) {
+  const auto at = text.find(Cat("\n", what));
+  if (at == std::string::npos) return Cat("(no line '", what, "')");
+  return text.substr(at + 1, text.find('\n', at + 1) - at - 1);
+}
+
+TEST(Calibration, T3CrossTalkVerdictIsComputedFromTheCounts) {
   const SkinTwin& twin = DefaultTwin();
   const auto& hs = HotSpots();
-  std::vector<double> at25;
+  TwinReport r;
   std::string table;
   for (std::size_t i = 0; i < kN; ++i) {
-    const int n1 = Neighbours(twin.StrainShiftsPm(Contact{hs[i].peak_at, 1.0, DefaultScene().probe}), i);
-    const int n25 = Neighbours(twin.StrainShiftsPm(Contact{hs[i].peak_at, 2.5, DefaultScene().probe}), i);
-    table += "FBG " + std::to_string(i + 1) + ": " + std::to_string(n1) + " / " + std::to_string(n25) + "\n";
-    EXPECT_GE(n1, 1) << "FBG " << i + 1 << ": no neighbour over 2 pm at 1 N";
-    EXPECT_GE(n25, n1) << "FBG " << i + 1;
-    at25.push_back(n25);
+    r.crosstalk_1n[i] = Neighbours(twin.StrainShiftsPm(Contact{hs[i].peak_at, 1.0, DefaultScene().probe}), i);
+    r.crosstalk_2n5[i] = Neighbours(twin.StrainShiftsPm(Contact{hs[i].peak_at, 2.5, DefaultScene().probe}), i);
+    table += "FBG " + std::to_string(i + 1) + ": " + std::to_string(r.crosstalk_1n[i]) + " / " +
+             std::to_string(r.crosstalk_2n5[i]) + "\n";
+    // Physics, whatever the targets: more force never reaches fewer neighbours.
+    EXPECT_GE(r.crosstalk_2n5[i], r.crosstalk_1n[i]) << "FBG " << i + 1;
   }
-  EXPECT_GE(stats::Median(at25), 2.0) << table;
   RecordProperty("crosstalk_1n_2n5", table);
+  const int min1 = *std::min_element(r.crosstalk_1n.begin(), r.crosstalk_1n.end());
+  const int min25 = *std::min_element(r.crosstalk_2n5.begin(), r.crosstalk_2n5.end());
+  EXPECT_EQ(MinNeighbours(r.crosstalk_2n5), min25);
+  // The verdict function against its targets, at the boundary.
+  EXPECT_EQ(CrossTalkVerdict(Targets::kCrossTalk2n5Min, Targets::kCrossTalk2n5Min), Verdict::kMet);
+  EXPECT_EQ(CrossTalkVerdict(Targets::kCrossTalk2n5Min - 1, Targets::kCrossTalk2n5Min), Verdict::kShort);
+  EXPECT_EQ(Targets::kCrossTalk2n5Min, 3) << "the issue's 'several' at 2.5 N";
+  // The report prints the measured minimum and the verdict those numbers give: "short" when the twin
+  // falls short of 3 neighbours (it does today: row-end gratings reach one), "met" otherwise.
+  const std::string text = FormatReport(r);
+  const std::string l25 = ReportLine(text, "T3 neighbours > 2 pm at 2.5 N");
+  const std::string l1 = ReportLine(text, "T3 neighbours > 2 pm at 1 N");
+  EXPECT_NE(l25.find(Cat(" ", std::to_string(min25), " / ")), std::string::npos) << l25;
+  EXPECT_NE(l25.find(">= 3 (several)"), std::string::npos) << l25;
+  EXPECT_NE(l25.find(min25 >= 3 ? " met" : " short"), std::string::npos) << l25 << "\n" << table;
+  EXPECT_NE(l1.find(min1 >= 1 ? " met" : " short"), std::string::npos) << l1;
+  // And the text says which it is: these lines are predictions, not fits.
+  EXPECT_LT(text.find("FITTED"), text.find("T2 hot-spot area, median"));
+  EXPECT_LT(text.find("PREDICTED"), text.find("T3 neighbours"));
+  EXPECT_GT(text.find("PREDICTED"), text.find("T2 hot-spot area, quartiles"));
 }
 
 // ---------------------------------------------------------------------------------------------------
@@ -130,13 +165,35 @@ TEST(Calibration, T1Detection) {
     EXPECT_GE(fit->points.back().rate(), 0.75) << what;
     EXPECT_LE(fit->points.front().rate(), 0.5) << what;
   }
-  // Where the physics puts them (docs/twin.md): uniform sites near 0.2 N (FACTS.md's estimate for a linear
-  // model meeting T2), sites near a grating below the paper's 50.6 mN.
-  EXPECT_GT(uniform.threshold75_n, 0.10);
-  EXPECT_LT(uniform.threshold75_n, 0.40);
-  EXPECT_LT(close.threshold75_n, Targets::kDetection75N);
+  // Physics: touches near a grating are detected at lower forces than touches anywhere.
   EXPECT_LT(close.threshold75_n, uniform.threshold75_n)
       << "near " << close.threshold75_n << " N, uniform " << uniform.threshold75_n << " N";
+  // What the report claims: the measured threshold and the verdict its number gives against 50.6 mN
+  // +-30 % (short above, beyond below), whatever that verdict is.
+  auto expected = [](double t) {
+    if (!std::isfinite(t) || t > 0.0506 * 1.3) return std::string("short");
+    return std::string(t < 0.0506 * 0.7 ? "beyond" : "met");
+  };
+  EXPECT_EQ(VerdictName(DetectionVerdict(uniform.threshold75_n)), expected(uniform.threshold75_n));
+  EXPECT_EQ(VerdictName(DetectionVerdict(close.threshold75_n)), expected(close.threshold75_n));
+  EXPECT_STREQ(VerdictName(DetectionVerdict(0.0506)), "met");
+  EXPECT_STREQ(VerdictName(DetectionVerdict(0.0506 * 1.31)), "short");
+  EXPECT_STREQ(VerdictName(DetectionVerdict(0.0506 * 0.69)), "beyond");
+  EXPECT_STREQ(VerdictName(DetectionVerdict(std::numeric_limits<double>::quiet_NaN())), "short");
+  TwinReport r;
+  r.detection_uniform = uniform;
+  r.detection_near_grating = close;
+  const std::string text = FormatReport(r);
+  const std::string lu = ReportLine(text, "T1 75 % detection, uniform random sites");
+  char measured[32];
+  std::snprintf(measured, sizeof measured, " %.0f mN", uniform.threshold75_n * 1e3);
+  EXPECT_NE(lu.find(measured), std::string::npos) << lu;
+  EXPECT_NE(lu.find("50.6 mN (+-30 %)"), std::string::npos) << lu;
+  EXPECT_NE(lu.find(Cat(" ", expected(uniform.threshold75_n), " ")), std::string::npos) << lu;
+  const std::string ln = ReportLine(text, "T1 75 % detection, sites <= 3 mm");
+  EXPECT_NE(ln.find(Cat(" ", expected(close.threshold75_n), " ")), std::string::npos) << ln;
+  RecordProperty("t1_uniform_mn", std::to_string(uniform.threshold75_n * 1e3));
+  RecordProperty("t1_near_grating_mn", std::to_string(close.threshold75_n * 1e3));
 }
 
 // ---------------------------------------------------------------------------------------------------

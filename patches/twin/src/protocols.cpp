@@ -5,6 +5,8 @@
 #include <random>
 
 #include "ruffini/error.h"
+#include "ruffini/yaml_reader.h"
+#include "ruffini/twin/viscoelastic.h"
 
 namespace ruffini::twin {
 namespace {
@@ -83,6 +85,35 @@ const ContactLaw* RequireSphere(const SkinTwin& twin, const Scene& scene, const 
   return law;
 }
 
+// What the probe does -> the contacts the twin sees. Without the viscoelastic effect: the applied contact
+// itself, exactly as the protocols always emitted it. With it: the filtered force at the current site plus
+// the fading residuals of the sites pressed before.
+class Loads {
+ public:
+  Loads(const SkinTwin& twin, double rate_hz, const Probe& probe)
+      : visco_(twin.effects().viscoelastic.has_value()),
+        sites_(visco_ ? &*twin.effects().viscoelastic : nullptr, 1.0 / rate_hz, probe), probe_(probe) {}
+  void MoveTo(const patch::SurfacePoint& at) {
+    at_ = at;
+    sites_.MoveTo(at);
+  }
+  // Probe on the skin at the current site with this force (0 allowed: touching, not pressing).
+  std::span<const Contact> Press(double force_n) {
+    if (visco_) return sites_.Step(force_n);
+    applied_ = Contact{at_, force_n, probe_};
+    return {&applied_, 1};
+  }
+  // Probe off the skin.
+  std::span<const Contact> Release() { return visco_ ? sites_.Step(0.0) : std::span<const Contact>{}; }
+
+ private:
+  bool visco_;
+  ViscoelasticSites sites_;
+  Probe probe_;
+  patch::SurfacePoint at_{};
+  Contact applied_{};
+};
+
 patch::SurfacePoint UniformIn(const patch::Region& a, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   const double y = a.y_min_mm + (a.y_max_mm - a.y_min_mm) * u(rng);
@@ -114,17 +145,18 @@ ProtocolRun RunPaper(const SkinTwin& twin, const Scene& scene, const PaperProtoc
   const ContactLaw* law = RequireSphere(twin, scene, "paper");
   const patch::Region area = twin.spec().indented_area;
 
-  for (int i = 0; i < p.rest_frames; ++i) rec.Emit({}, cell.Read(0.0), 0.0f, kNaN, kNaN, -1);
+  Loads loads(twin, p.rate_hz, scene.probe);
+  for (int i = 0; i < p.rest_frames; ++i) rec.Emit(loads.Release(), cell.Read(0.0), 0.0f, kNaN, kNaN, -1);
   for (int k = 0; k < p.indentations; ++k) {
     const patch::SurfacePoint at = UniformIn(area, rng);
     const double gap = p.approach_mm * (1.0 + p.approach_jitter * (2.0 * u(rng) - 1.0));
+    loads.MoveTo(at);
     for (int n = 0;; ++n) {
       const double travel = p.speed_mm_s * n / p.rate_hz - gap;
       const double depth = std::max(0.0, travel);
       const double force = law->ForceN(depth);
       if (force > p.max_force_n) break;  // only the increasing-load phase is kept
-      const Contact c{at, force, scene.probe};
-      rec.Emit(std::span<const Contact>(&c, 1), cell.Read(force), static_cast<float>(force),
+      rec.Emit(loads.Press(force), cell.Read(force), static_cast<float>(force),
                static_cast<float>(at.y_mm), static_cast<float>(at.r_deg), k);
     }
     if (progress && (k % 16 == 15 || k + 1 == p.indentations)) progress(static_cast<std::uint64_t>(k + 1), static_cast<std::uint64_t>(p.indentations));
@@ -141,6 +173,7 @@ ProtocolRun RunVonFrey(const SkinTwin& twin, const VonFreyProtocol& p, std::uint
   const patch::Region area = twin.spec().indented_area;
   const patch::Geometry& geo = twin.geometry();
   const int total = static_cast<int>(p.filaments_g.size()) * p.subjects * p.sites;
+  Loads loads(twin, p.rate_hz, Probe{Probe::Shape::kPoint, p.tip_radius_mm});
   int index = 0;
   for (int s = 0; s < p.subjects; ++s) {
     for (double grams : p.filaments_g) {
@@ -156,12 +189,11 @@ ProtocolRun RunVonFrey(const SkinTwin& twin, const VonFreyProtocol& p, std::uint
           at = UniformIn(area, rng);
         }
         const double f_nom = GramsToNewtons(grams);
-        const Probe probe{Probe::Shape::kPoint, p.tip_radius_mm};
         const auto y = static_cast<float>(at.y_mm), r = static_cast<float>(at.r_deg);
-        for (int n = 0; n < p.rest_frames; ++n) rec.Emit({}, 0.0f, 0.0f, kNaN, kNaN, -1);
+        for (int n = 0; n < p.rest_frames; ++n) rec.Emit(loads.Release(), 0.0f, 0.0f, kNaN, kNaN, -1);
+        loads.MoveTo(at);
         auto emit_force = [&](double f) {
-          const Contact c{at, f, probe};
-          rec.Emit(std::span<const Contact>(&c, 1), static_cast<float>(f), static_cast<float>(f), y, r, index);
+          rec.Emit(loads.Press(f), static_cast<float>(f), static_cast<float>(f), y, r, index);
         };
         for (int n = 1; n <= p.ramp_frames; ++n) emit_force(f_nom * n / p.ramp_frames);
         for (int n = 0; n < p.hold_frames; ++n) emit_force(f_nom);
@@ -185,14 +217,15 @@ ProtocolRun RunReceptiveField(const SkinTwin& twin, const Scene& scene, const Re
   const double arc0 = geo.ArcMm(area.r_min_deg), arc1 = geo.ArcMm(area.r_max_deg);
   const int ny = static_cast<int>(std::floor((area.y_max_mm - area.y_min_mm) / p.step_mm)) + 1;
   const int na = static_cast<int>(std::floor((arc1 - arc0) / p.step_mm)) + 1;
+  Loads loads(twin, p.rate_hz, scene.probe);
   int index = 0;
   for (int i = 0; i < ny; ++i) {
     for (int j = 0; j < na; ++j) {
       const patch::SurfacePoint at{area.y_min_mm + i * p.step_mm, geo.RDeg(arc0 + j * p.step_mm)};
+      loads.MoveTo(at);
       for (int n = 0; n <= p.ramp_frames; ++n) {
         const double f = p.max_force_n * n / p.ramp_frames;
-        const Contact c{at, f, scene.probe};
-        rec.Emit(std::span<const Contact>(&c, 1), cell.Read(f), static_cast<float>(f), static_cast<float>(at.y_mm),
+        rec.Emit(loads.Press(f), cell.Read(f), static_cast<float>(f), static_cast<float>(at.y_mm),
                  static_cast<float>(at.r_deg), index);
       }
       ++index;
@@ -201,6 +234,86 @@ ProtocolRun RunReceptiveField(const SkinTwin& twin, const Scene& scene, const Re
   }
   rec.Flush();
   return {rec.frames(), index};
+}
+
+void FieldProtocol::Validate() const {
+  auto fail = [](const std::string& what) { throw InputError("field protocol: " + what); };
+  auto positive = [&](const char* name, double v) {
+    if (!(v > 0.0) || !std::isfinite(v)) fail(std::string(name) + " (" + FormatNumber(v) + ") must be positive");
+  };
+  auto range = [&](const char* lo_name, double lo, const char* hi_name, double hi) {
+    if (!(lo >= 0.0) || !std::isfinite(hi)) {
+      fail(std::string(lo_name) + " (" + FormatNumber(lo) + ") and " + hi_name + " must be finite and >= 0");
+    }
+    if (lo > hi) {
+      fail(std::string(lo_name) + " (" + FormatNumber(lo) + ") must not exceed " + hi_name + " (" + FormatNumber(hi) + ")");
+    }
+  };
+  positive("duration_s", duration_s);
+  positive("rate_hz", rate_hz);
+  range("first_rest_s", first_rest_s, "duration_s", duration_s);
+  range("rest_min_s", rest_min_s, "rest_max_s", rest_max_s);
+  range("ramp_up_min_s", ramp_up_min_s, "ramp_up_max_s", ramp_up_max_s);
+  range("hold_min_s", hold_min_s, "hold_max_s", hold_max_s);
+  range("ramp_down_min_s", ramp_down_min_s, "ramp_down_max_s", ramp_down_max_s);
+  positive("force_min_n", force_min_n);
+  range("force_min_n", force_min_n, "force_max_n", force_max_n);
+}
+
+ProtocolRun RunField(const SkinTwin& twin, const Scene& scene, const FieldProtocol& p, std::uint64_t seed,
+                     const FrameSink& sink, const ProgressFn& progress) {
+  p.Validate();
+  Recorder rec(twin, DeriveSeed(seed, 1), p.rate_hz, sink);
+  LoadCellModel cell(scene.load_cell, DeriveSeed(seed, 2));
+  std::mt19937_64 rng(DeriveSeed(seed, 5));
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  (void)RequireSphere(twin, scene, "field");
+  const patch::Region area = twin.spec().indented_area;
+  Loads loads(twin, p.rate_hz, scene.probe);
+  const auto total = static_cast<std::uint64_t>(std::llround(p.duration_s * p.rate_hz));
+  auto frames_of = [&](double s) { return static_cast<std::uint64_t>(std::llround(s * p.rate_hz)); };
+  auto uniform = [&](double lo, double hi) { return lo + (hi - lo) * u(rng); };
+  auto report = [&] {
+    if (progress) {
+      progress(static_cast<std::uint64_t>(static_cast<double>(rec.frames()) / p.rate_hz),
+               static_cast<std::uint64_t>(p.duration_s));
+    }
+  };
+  auto rest = [&](std::uint64_t n) {
+    for (std::uint64_t i = 0; i < n && rec.frames() < total; ++i) rec.Emit(loads.Release(), cell.Read(0.0), 0.0f, kNaN, kNaN, -1);
+  };
+
+  rest(frames_of(p.first_rest_s));
+  int cycles = 0;
+  while (rec.frames() < total) {
+    // Every draw of a cycle, in a fixed order, before any frame: the same seed gives the same cycles.
+    const double rest_s = uniform(p.rest_min_s, p.rest_max_s);
+    const patch::SurfacePoint at = UniformIn(area, rng);
+    const double up_s = uniform(p.ramp_up_min_s, p.ramp_up_max_s);
+    const double target_n = std::exp(uniform(std::log(p.force_min_n), std::log(p.force_max_n)));
+    const double hold_s = uniform(p.hold_min_s, p.hold_max_s);
+    const double down_s = uniform(p.ramp_down_min_s, p.ramp_down_max_s);
+    rest(frames_of(rest_s));
+    if (rec.frames() >= total) break;
+    loads.MoveTo(at);
+    const int k = cycles++;
+    const auto y = static_cast<float>(at.y_mm), r = static_cast<float>(at.r_deg);
+    auto press = [&](double f) {
+      if (rec.frames() < total) rec.Emit(loads.Press(f), cell.Read(f), static_cast<float>(f), y, r, k);
+    };
+    const std::uint64_t n_up = std::max<std::uint64_t>(1, frames_of(up_s));
+    const std::uint64_t n_hold = frames_of(hold_s);
+    const std::uint64_t n_down = std::max<std::uint64_t>(1, frames_of(down_s));
+    for (std::uint64_t i = 1; i <= n_up; ++i) press(target_n * static_cast<double>(i) / static_cast<double>(n_up));
+    for (std::uint64_t i = 0; i < n_hold; ++i) press(target_n);
+    for (std::uint64_t i = 1; i <= n_down; ++i) {
+      press(target_n * static_cast<double>(n_down - i) / static_cast<double>(n_down));
+    }
+    report();
+  }
+  rec.Flush();
+  report();
+  return {rec.frames(), cycles};
 }
 
 }  // namespace ruffini::twin

@@ -1,5 +1,6 @@
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
+#include "ruffini/twin/viscoelastic.h"
 
 #include <filesystem>
 
@@ -16,11 +17,11 @@ constexpr long kGratingMax = static_cast<long>(patch::kGratings);
 TwinEffects ReadEffects(YamlReader& e) {
   TwinEffects out;
   if (auto n = e.MapOr("noise")) {
-    out.noise = NoiseEffect{n->NumberOr("sigma_pm", 0.3, 0.0, 10.0)};
+    out.noise = NoiseEffect{n->NumberOr("sigma_pm", NoiseEffect{}.sigma_pm, 0.0, 10.0)};
     n->Finish();
   }
   if (auto g = e.MapOr("gain_spread")) {
-    out.gain_spread = GainSpreadEffect{g->NumberOr("sigma", 0.07, 0.0, 0.5)};
+    out.gain_spread = GainSpreadEffect{g->NumberOr("sigma", GainSpreadEffect{}.sigma, 0.0, 0.5)};
     g->Finish();
   }
   if (e.Has("irregular_gratings")) {
@@ -48,14 +49,54 @@ TwinEffects ReadEffects(YamlReader& e) {
   }
   if (auto t = e.MapOr("temperature")) {
     TemperatureEffect te;
-    te.offset_c = t->NumberOr("offset_c", 0.0, -100.0, 100.0);
-    te.amplitude_c = t->NumberOr("amplitude_c", 0.0, 0.0, 100.0);
-    te.period_s = t->NumberOr("period_s", 600.0, 1e-3, kBig);
-    te.ramp_c_per_s = t->NumberOr("ramp_c_per_s", 0.0, -10.0, 10.0);
-    te.coefficient_pm_per_c = t->NumberOr("coefficient_pm_per_c", 10.0, 0.0, 100.0);
-    te.spread = t->NumberOr("spread", 0.03, 0.0, 0.5);
+    te.offset_c = t->NumberOr("offset_c", te.offset_c, -100.0, 100.0);
+    te.amplitude_c = t->NumberOr("amplitude_c", te.amplitude_c, 0.0, 100.0);
+    te.period_s = t->NumberOr("period_s", te.period_s, 1e-3, kBig);
+    te.ramp_c_per_s = t->NumberOr("ramp_c_per_s", te.ramp_c_per_s, -10.0, 10.0);
+    te.coefficient_pm_per_c = t->NumberOr("coefficient_pm_per_c", te.coefficient_pm_per_c, 0.0, 100.0);
+    te.spread = t->NumberOr("spread", te.spread, 0.0, 0.5);
+    if (auto tri = t->MapOr("triangle")) {
+      te.triangle_rate_c_per_h = tri->Number("rate_c_per_h", -1000.0, 1000.0);
+      te.triangle_period_s = tri->NumberOr("period_s", te.triangle_period_s, 1.0, kBig);
+      tri->Finish();
+    }
+    if (t->Has("knots")) {
+      for (YamlReader& k : t->Sequence("knots")) {
+        TemperatureKnot knot;
+        knot.t_s = k.Number("t_s", -kBig, kBig);
+        knot.c = k.Number("c", -100.0, 100.0);
+        if (!te.knots.empty() && !(knot.t_s > te.knots.back().t_s)) {
+          k.Fail("t_s", "must be later than the knot before it (t_s " + FormatNumber(te.knots.back().t_s) +
+                            "); a step is two knots a short time apart");
+        }
+        k.Finish();
+        te.knots.push_back(knot);
+      }
+      if (te.knots.empty()) t->Fail("knots", "must list at least one knot ({t_s, c}) or be left out");
+    }
     t->Finish();
     out.temperature = te;
+  }
+  if (auto v = e.MapOr("viscoelastic")) {
+    ViscoelasticEffect ve;
+    if (v->Has("terms")) {
+      ve.terms.clear();
+      for (YamlReader& k : v->Sequence("terms")) {
+        PronyTerm term;
+        term.g = k.Number("g", 0.0, 1.0);
+        term.tau_s = k.Number("tau_s", 1e-3, 1e5);
+        k.Finish();
+        ve.terms.push_back(term);
+      }
+      if (ve.terms.empty() || ve.terms.size() > ViscoelasticFilter::kMaxTerms) {
+        v->Fail("terms", "must list 1 to " + std::to_string(ViscoelasticFilter::kMaxTerms) + " Prony terms ({g, tau_s})");
+      }
+      if (ve.total_creep() > 1.0) {
+        v->Fail("terms", "must add up to a creep of at most 1 (the sum of g is " + FormatNumber(ve.total_creep()) + ")");
+      }
+    }
+    v->Finish();
+    out.viscoelastic = ve;
   }
   if (e.Has("faults")) {
     for (YamlReader& f : e.Sequence("faults")) {
@@ -70,10 +111,10 @@ TwinEffects ReadEffects(YamlReader& e) {
   }
   if (auto s = e.MapOr("skin_sample")) {
     SkinSampleEffect ss;
-    ss.seed = static_cast<std::uint64_t>(s->IntegerOr("seed", 0, 0, 1L << 40));
-    ss.position_mm = s->NumberOr("position_mm", 1.0, 0.0, 10.0);
-    ss.thickness_sigma = s->NumberOr("thickness_sigma", 0.03, 0.0, 0.2);
-    ss.wavelength_nm = s->NumberOr("wavelength_nm", 0.05, 0.0, 0.05);
+    ss.seed = static_cast<std::uint64_t>(s->IntegerOr("seed", static_cast<long>(ss.seed), 0, 1L << 40));
+    ss.position_mm = s->NumberOr("position_mm", ss.position_mm, 0.0, 10.0);
+    ss.thickness_sigma = s->NumberOr("thickness_sigma", ss.thickness_sigma, 0.0, 0.2);
+    ss.wavelength_nm = s->NumberOr("wavelength_nm", ss.wavelength_nm, 0.0, 0.05);
     s->Finish();
     out.skin_sample = ss;
   }

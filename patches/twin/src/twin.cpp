@@ -269,10 +269,35 @@ InterrogatorSim::InterrogatorSim(const SkinTwin& twin, std::uint64_t seed)
   }
 }
 
+double TemperatureEffect::AtC(double t) const noexcept {
+  double c = offset_c + amplitude_c * std::sin(2.0 * std::numbers::pi * t / period_s) + ramp_c_per_s * t;
+  if (triangle_rate_c_per_h != 0.0) {
+    // Zero-mean triangle: up for a quarter period, down for a half, up for the last quarter.
+    const double rate_c_per_s = triangle_rate_c_per_h / 3600.0;
+    const double p = t - triangle_period_s * std::floor(t / triangle_period_s);  // phase in [0, period)
+    const double q = triangle_period_s / 4.0;
+    c += rate_c_per_s * (p < q ? p : p < 3.0 * q ? 2.0 * q - p : p - 4.0 * q);
+  }
+  if (!knots.empty()) {
+    if (t <= knots.front().t_s) {
+      c += knots.front().c;
+    } else if (t >= knots.back().t_s) {
+      c += knots.back().c;
+    } else {
+      const auto hi = std::upper_bound(knots.begin(), knots.end(), t,
+                                       [](double x, const TemperatureKnot& k) { return x < k.t_s; });
+      const auto lo = hi - 1;
+      const double w = (t - lo->t_s) / (hi->t_s - lo->t_s);
+      c += lo->c + w * (hi->c - lo->c);
+    }
+  }
+  return c;
+}
+
 double InterrogatorSim::TemperatureC(double t) const noexcept {
   const auto& te = twin_.effects().temperature;
   if (!te) return 0.0;
-  return te->offset_c + te->amplitude_c * std::sin(2.0 * std::numbers::pi * t / te->period_s) + te->ramp_c_per_s * t;
+  return te->AtC(t);
 }
 
 void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, patch::kGratings>& wl,
@@ -307,6 +332,7 @@ std::string TwinEffects::Summary() const {
   if (irregular) add("irregular_gratings");
   if (stiffening) add("stiffening");
   if (temperature) add("temperature");
+  if (viscoelastic) add("viscoelastic");
   if (!faults.empty()) add("faults");
   if (skin_sample) add("skin_sample=" + std::to_string(skin_sample->seed));
   return s.empty() ? "none" : s;

@@ -37,8 +37,21 @@ struct IrregularEffect {
 // Hyperelastic stiffening (Yeoh) of the silicone under the probe at high force.
 struct StiffeningEffect {};
 
-// Temperature: dT(t) = offset_c + amplitude_c sin(2 pi t / period_s) + ramp_c_per_s t, shifting every
-// grating by coefficient_pm_per_c * (1 + spread * n_i) per degree, n_i ~ N(0,1) per grating.
+// Temperature: dT(t) = offset_c + amplitude_c sin(2 pi t / period_s) + ramp_c_per_s t
+//                     + triangle(t) + knots(t),
+// shifting every grating by coefficient_pm_per_c * (1 + spread * n_i) per degree, n_i ~ N(0,1) per grating.
+//   triangle(t): zero-mean triangle wave rising at triangle_rate_c_per_h for the first quarter period, falling
+//     for half a period, rising again: a "+-10 C/h" ramp up and down, amplitude rate * period / 4.
+//   knots(t): piecewise-linear through the knots (strictly increasing t_s), held at the first / last value
+//     outside them; a step is two knots a short time apart. No knots: 0.
+// FBG thermal sensitivity: d lambda / dT = (alpha + xi) lambda ~ 10 pm/C at 1550 nm (Kersey et al., "Fiber
+// grating sensors", J. Lightwave Technol. 15(8), 1997, for the physics; Cosme et al., "Accurate determination
+// of the temperature sensitivity of UV-induced fiber Bragg gratings", PMC12846186: (alpha + xi) = 5.2e-6 to
+// 6.7e-6 /K at 20 C in Ge-doped fibres, i.e. 8.0 to 10.4 pm/K at 1550 nm).
+struct TemperatureKnot {
+  double t_s = 0.0;
+  double c = 0.0;
+};
 struct TemperatureEffect {
   double offset_c = 0.0;
   double amplitude_c = 0.0;
@@ -46,6 +59,33 @@ struct TemperatureEffect {
   double ramp_c_per_s = 0.0;
   double coefficient_pm_per_c = 10.0;
   double spread = 0.03;
+  double triangle_rate_c_per_h = 0.0;
+  double triangle_period_s = 3600.0;
+  std::vector<TemperatureKnot> knots;
+
+  // dT at time t. Real-time safe: no allocation, no lock, no throw.
+  [[nodiscard]] double AtC(double t_s) const noexcept;
+};
+
+// Viscoelastic silicone: creep under a held load, a different unloading path, and a residual after release
+// that fades. The strain the gratings see follows an effective force
+//   F_eff(t) = F(t) + sum_k g_k x_k(t),   dx_k/dt = (F(t) - x_k) / tau_k,
+// i.e. a creep compliance J(t) = J0 [1 + sum_k g_k (1 - exp(-t / tau_k))] (a Prony series, Boltzmann
+// superposition). Under a held load the response creeps up by sum g_k; after release it decays to zero with
+// the tau_k (a "phantom contact"); loading and unloading differ at the same force (hysteresis).
+// Source (silicones of the Dragon Skin / Ecoflex family): see ViscoelasticFilter (viscoelastic.h) and
+// docs/twin.md, "Field effects".
+struct PronyTerm {
+  double g = 0.0;      // relative creep amplitude of the term
+  double tau_s = 1.0;  // retardation time
+};
+struct ViscoelasticEffect {
+  std::vector<PronyTerm> terms = {{0.05, 1.0}, {0.04, 10.0}, {0.03, 100.0}};
+  [[nodiscard]] double total_creep() const noexcept {
+    double s = 0.0;
+    for (const auto& t : terms) s += t.g;
+    return s;
+  }
 };
 
 // A grating whose peak is lost (dead) or weak (dimmed: more noise, the peak dropping out at times).
@@ -72,6 +112,7 @@ struct TwinEffects {
   std::optional<IrregularEffect> irregular;
   std::optional<StiffeningEffect> stiffening;
   std::optional<TemperatureEffect> temperature;
+  std::optional<ViscoelasticEffect> viscoelastic;
   std::vector<FaultEffect> faults;
   std::optional<SkinSampleEffect> skin_sample;
 

@@ -9,6 +9,15 @@
 // vonfrey: the paper's sensitivity test: 8 filaments (0.4 g to 60 g) x subjects x sites at random positions,
 //   each a short ramp, a hold at the filament's buckling force and a release.
 // receptive-field: a grid scan with the probe, each site ramped to 2.5 N, for hot-spot maps.
+// field: what a skin meets in use rather than in the lab: press-hold-release cycles of the scene's probe at
+//   uniform random positions over the indented area, each after a rest of U(1, 30) s untouched: a
+//   force-controlled ramp up over U(0.5, 3) s to a force drawn log-uniformly in 0.1-2.5 N, a hold of
+//   U(0, 120) s and a ramp down over U(0.3, 2) s; a long rest first (a decoder's baseline); duration_s in all.
+//   Labels as the paper protocol writes them: force_n the load cell, true_force_n the applied force, y/r and
+//   indentation = the cycle's index over its ramp up, hold and ramp down (contiguous), -1 and NaN in rests.
+//   Meant for scenes with field effects (viscoelastic silicone, temperature histories): see forearm-field.yaml.
+// When the scene names the viscoelastic effect, every protocol drives the twin with the filtered force of
+// each site it pressed (viscoelastic.h); labels stay the applied force. Without it, frames are as before.
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -49,6 +58,21 @@ struct ReceptiveFieldProtocol {
   double rate_hz = 100.0;
 };
 
+struct FieldProtocol {
+  double duration_s = 3600.0;
+  double rate_hz = 100.0;
+  double first_rest_s = 10.0;     // untouched baseline before the first press
+  double rest_min_s = 1.0, rest_max_s = 30.0;
+  double ramp_up_min_s = 0.5, ramp_up_max_s = 3.0;
+  double force_min_n = 0.1, force_max_n = 2.5;  // log-uniform
+  double hold_min_s = 0.0, hold_max_s = 120.0;
+  double ramp_down_min_s = 0.3, ramp_down_max_s = 2.0;
+
+  // Throws InputError naming the first field out of range (e.g. "field protocol: rest_min_s (5) must not
+  // exceed rest_max_s (1)").
+  void Validate() const;
+};
+
 // Receives frames in blocks; must copy what it keeps.
 using FrameSink = std::function<void(std::span<const dataset::Frame>)>;
 // Called now and then with (done, total) units of work (indentations, stimulations, sites).
@@ -65,6 +89,10 @@ ProtocolRun RunVonFrey(const SkinTwin& twin, const VonFreyProtocol& p, std::uint
                        const ProgressFn& progress = {});
 ProtocolRun RunReceptiveField(const SkinTwin& twin, const Scene& scene, const ReceptiveFieldProtocol& p,
                               std::uint64_t seed, const FrameSink& sink, const ProgressFn& progress = {});
+
+// Progress counts seconds of recording done / total.
+ProtocolRun RunField(const SkinTwin& twin, const Scene& scene, const FieldProtocol& p, std::uint64_t seed,
+                     const FrameSink& sink, const ProgressFn& progress = {});
 
 // Newtons for a von Frey filament's nominal grams.
 inline double GramsToNewtons(double g) { return g * 9.80665e-3; }
