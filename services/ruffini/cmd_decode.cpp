@@ -121,8 +121,9 @@ ModelAndData LoadModelAndData(const std::string& model_path, const std::string& 
 }
 
 eval::StreamPredictions DecodeWithProgress(const v1::DecoderModel& m, const patch::PatchSpec& spec, const dataset::Dataset& d,
-                                           const std::string& label) {
+                                           const std::string& label, bool freeze_on_gate = true) {
   decode::PipelineConfig cfg;
+  cfg.freeze_on_gate = freeze_on_gate;
   cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
   const decode::Pipeline<float> pipe(m, spec, cfg);
   std::unique_ptr<ProgressBar> bar;
@@ -145,6 +146,7 @@ void RegisterEvaluate(CLI::App& app) {
     std::string model, data, report, patch_spec = RUFFINI_DEFAULT_PATCH;
     std::vector<std::string> also;
     bool inversion = true;
+    bool gate_freeze = true;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("evaluate", "Evaluate a model: decode as one stream, score honestly and as the paper did; write a report folder");
@@ -155,6 +157,9 @@ void RegisterEvaluate(CLI::App& app) {
   cmd->add_option("--report", a->report, "Report folder (report.md, pictures, predictions.h5)")->required();
   cmd->add_option("--also", a->also, "More datasets scored as rows of the field table: LABEL=FILE.h5 (other casts, field protocol)");
   cmd->add_option("--inversion,!--no-inversion", a->inversion, "Also score the inversion decoder (training data only)")->capture_default_str();
+  cmd->add_option("--gate-freeze,!--no-gate-freeze", a->gate_freeze,
+                  "The decoder's gate freezes the baseline (--no-gate-freeze: only large shifts do, the old tracker)")
+      ->capture_default_str();
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
     const ModelAndData md = LoadModelAndData(a->model, a->data, a->patch_spec);
@@ -169,7 +174,7 @@ void RegisterEvaluate(CLI::App& app) {
     } else {
       test = p.ids;  // unseen data: every indentation is test data
     }
-    const auto sp = DecodeWithProgress(m, spec, d, "decoding frames");
+    const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", a->gate_freeze);
     const auto mask = eval::MaskOfIndentations(d, test);
     eval::Predictions pred;
     pred.force_n.resize(d.size());
@@ -202,7 +207,7 @@ void RegisterEvaluate(CLI::App& app) {
       const std::string label = item.substr(0, eq), path = item.substr(eq + 1);
       const dataset::Dataset other = dataset::ReadDataset(path);
       if (other.info.patch_name != m.patch_name()) throw InputError(path + ": dataset is from patch '" + other.info.patch_name + "'");
-      const auto osp = DecodeWithProgress(m, spec, other, "decoding " + label);
+      const auto osp = DecodeWithProgress(m, spec, other, "decoding " + label, a->gate_freeze);
       std::vector<std::int32_t> ids;
       for (std::size_t k = 0; k < other.size(); ++k) {
         if (other.indentation[k] >= 0 && (ids.empty() || ids.back() != other.indentation[k])) ids.push_back(other.indentation[k]);
@@ -261,6 +266,7 @@ void RegisterEvaluate(CLI::App& app) {
     }
     std::string command = "ruffini evaluate --model " + a->model + " --data " + a->data + " --report " + a->report;
     for (const auto& item : a->also) command += " --also " + item;
+    if (!a->gate_freeze) command += " --no-gate-freeze";
     eval::WriteReport(a->report, m, a->data, p, pred, ev, spec, command, extra, h.str());
     eval::WriteStreamPredictions(a->report + "/stream_predictions.h5", sp, a->model, a->data);
     std::printf("honest: force %.1f mN all frames, %.1f mN above 50 mN; location above 50 mN %.2f mm (misses as failures), "

@@ -138,7 +138,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   if (raw != Reason::kOk) return invalid(raw);
 
   ShiftsPm shift;
-  const bool ready = d.tracker_.Update(wl, shift, d.gate_);
+  const bool ready = d.tracker_.Update(wl, shift, config_.freeze_on_gate && d.gate_);
   out.common_mode_pm = d.tracker_.common_mode_pm();
   if (!ready) return invalid(Reason::kCapturing);
   if (d.tracker_.stale()) return invalid(Reason::kBaselineStale);

@@ -45,6 +45,7 @@ struct PipelineConfig {
   int max_missing = 3;         // missing peaks tolerated (each replaced by its training mean)
   double band_margin_nm = 0.1; // a peak may sit this far beyond its band (cast tolerance) before it is out of band
   double z_limit = 40.0;       // models without an InputRange: |z| of any shift above this is out of range
+  bool freeze_on_gate = true;  // the decoder's open gate freezes the baseline (false: only the shifts do, as before v1.1)
 };
 
 struct PipelineOutput {
