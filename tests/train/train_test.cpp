@@ -1,6 +1,7 @@
 // Training (libtorch) and the Eigen runtime agree: golden vectors, a libtorch eager forward, save/load.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -9,6 +10,7 @@
 #include "ruffini/decode/network_decoder.h"
 #include "ruffini/error.h"
 #include "ruffini/eval/prepared.h"
+#include "ruffini/train/torch_decoder.h"
 #include "ruffini/train/trainer.h"
 #include "ruffini/twin/protocols.h"
 #include "ruffini/twin/scene.h"
@@ -97,11 +99,93 @@ TEST(TrainTest, RuntimeMatchesLibtorchOnGoldenVectors) {
 
 TEST(TrainTest, TorchEagerForwardEqualsRuntime) {
   const auto& m = F().models[1];
-  TorchForceNet torch_net(m);
+  TorchNets torch_net(m);
   decode::NetworkDecoder<float> d(m);
   decode::NetworkDecoder<float>::Data a(d);
   for (const auto& g : m.golden()) {
     EXPECT_NEAR(torch_net.Forward(g.window_shift_pm().data()), d.ForceOnWindow(g.window_shift_pm().data(), a), 1e-5);
+  }
+}
+
+// The frozen TorchScript nets compute what the eager nets compute: on every golden vector of every model, the
+// force and every grid's probabilities agree to 1e-5 (and both match the golden values libtorch exported).
+TEST(TorchDecoderTest, FrozenTorchScriptEqualsEagerOnGoldenVectors) {
+  UseOneTorchThread();
+  for (const auto& m : F().models) {
+    TorchNets eager(m, TorchVariant::kEager), frozen(m, TorchVariant::kFrozen);
+    ASSERT_EQ(frozen.variant(), TorchVariant::kFrozen);
+    ASSERT_GE(m.golden_size(), 1);
+    for (const auto& g : m.golden()) {
+      const float fe = eager.Forward(g.window_shift_pm().data());
+      const float ff = frozen.Forward(g.window_shift_pm().data());
+      EXPECT_NEAR(ff, fe, 1e-5 * std::max(1.0f, std::abs(fe)));
+      EXPECT_NEAR(ff, g.force_n(), 1e-5 * std::max(1.0f, std::abs(g.force_n())));
+      const decode::ShiftsPm last = testing::LastFrame(g, m);
+      std::vector<float> pe, pf;
+      eager.Locate(last.data(), pe);
+      frozen.Locate(last.data(), pf);
+      ASSERT_EQ(pf.size(), pe.size());
+      ASSERT_EQ(static_cast<int>(pf.size()), g.probabilities_size());
+      for (std::size_t k = 0; k < pf.size(); ++k) {
+        EXPECT_NEAR(pf[k], pe[k], 1e-5);
+        EXPECT_NEAR(pf[k], g.probabilities(static_cast<int>(k)), 1e-5);
+      }
+    }
+  }
+}
+
+// The libtorch frame decoders (window, gate, NIP around the nets) decode a stream as the Eigen runtime does.
+TEST(TorchDecoderTest, FrameDecodersFollowTheRuntimeOnAStream) {
+  UseOneTorchThread();
+  const auto& p = F().prepared;
+  // W = 8 (the window matters), with the gate moved to the median force of the stream, so that it opens
+  // and closes (these briefly trained nets rarely predict forces below the trained gate).
+  v1::DecoderModel m = F().models[1];
+  {
+    eval::NetworkFrameDecoder<float> probe(m);
+    std::vector<float> forces;
+    for (std::size_t i = 0; i < 3; ++i) {
+      probe.Reset(&p.shift_pm[p.ranges[i].first]);
+      for (std::size_t k = p.ranges[i].first; k < p.ranges[i].second; ++k) forces.push_back(probe.Decode(p.shift_pm[k]).force_n);
+    }
+    std::nth_element(forces.begin(), forces.begin() + static_cast<std::ptrdiff_t>(forces.size() / 2), forces.end());
+    m.mutable_gating()->set_on_n(forces[forces.size() / 2]);
+    m.mutable_gating()->set_off_n(forces[forces.size() / 2] - 1e-3f);
+  }
+  eval::NetworkFrameDecoder<float> runtime(m);
+  for (TorchVariant v : {TorchVariant::kEager, TorchVariant::kFrozen}) {
+    TorchFrameDecoder torch_dec(m, v);
+    std::size_t located = 0, frames = 0;
+    for (std::size_t i = 0; i < 3; ++i) {
+      const auto [first, last] = p.ranges[i];
+      runtime.Reset(&p.shift_pm[first]);
+      torch_dec.Reset(&p.shift_pm[first]);
+      for (std::size_t k = first; k < last; k += 1, ++frames) {
+        const auto a = runtime.Decode(p.shift_pm[k]);
+        const auto b = torch_dec.Decode(p.shift_pm[k]);
+        ASSERT_EQ(a.valid, b.valid) << VariantName(v) << " frame " << k;
+        EXPECT_NEAR(a.force_n, b.force_n, 1e-4) << VariantName(v) << " frame " << k;
+        ASSERT_EQ(a.located, b.located) << VariantName(v) << " frame " << k;
+        if (a.located) {
+          ++located;
+          EXPECT_NEAR(a.y_mm, b.y_mm, 1e-3);
+          EXPECT_NEAR(a.r_deg, b.r_deg, 1e-3);
+        }
+      }
+    }
+    EXPECT_GT(located, 0u) << "no frame of the stream opened the gate: the location path went untested";
+    EXPECT_GT(frames, located);
+  }
+}
+
+TEST(TorchDecoderTest, BenchDecodersAreEagerAndFrozen) {
+  const auto decoders = TorchBenchDecoders(F().models[0]);
+  ASSERT_EQ(decoders.size(), 2u);
+  EXPECT_EQ(decoders[0].configuration, "libtorch eager, same weights");
+  EXPECT_EQ(decoders[1].configuration, "libtorch TorchScript frozen, same weights");
+  for (const auto& d : decoders) {
+    EXPECT_EQ(d.runtime, eval::Runtime::kLibtorch);
+    EXPECT_NE(d.decoder, nullptr);
   }
 }
 
@@ -122,7 +206,7 @@ TEST(TrainTest, VariantKnobsAreRecorded) {
 // libtorch eager location (with its own unit scaling) and the runtime agree, for both input kinds.
 TEST(TrainTest, TorchEagerLocateEqualsRuntime) {
   for (const auto& m : F().models) {
-    TorchForceNet torch_net(m);
+    TorchNets torch_net(m);
     decode::NetworkDecoder<float> d(m);
     decode::NetworkDecoder<float>::Data a(d);
     for (const auto& g : m.golden()) {

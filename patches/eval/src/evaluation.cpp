@@ -3,7 +3,6 @@
 #include <hdf5.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -93,34 +92,6 @@ Predictions RunDecoder(FrameDecoder& dec, const Prepared& p, const std::vector<s
     if (progress && (k % 65536 == 0 || k + 1 == n)) progress(k + 1, n);
   }
   return out;
-}
-
-Latency MeasureLatency(FrameDecoder& dec, const Prepared& p, const std::vector<std::int32_t>& test_ids,
-                       std::size_t max_frames) {
-  const std::set<std::int32_t> test(test_ids.begin(), test_ids.end());
-  std::vector<double> ns;
-  ns.reserve(max_frames);
-  std::int32_t current = -2;
-  for (std::size_t k = 0; k < p.size() && ns.size() < max_frames; ++k) {
-    if (p.indentation[k] < 0 || !test.count(p.indentation[k])) continue;
-    if (p.indentation[k] != current) {
-      current = p.indentation[k];
-      dec.Reset(&p.shift_pm[k]);
-    }
-    const auto t0 = std::chrono::steady_clock::now();
-    (void)dec.Decode(p.shift_pm[k]);  // a virtual call that updates decoder state: never elided
-    const auto t1 = std::chrono::steady_clock::now();
-    ns.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count());
-  }
-  Latency l;
-  l.frames = ns.size();
-  if (ns.empty()) return l;
-  double sum = 0;
-  for (double v : ns) sum += v;
-  l.mean_us = sum / static_cast<double>(ns.size()) * 1e-3;
-  l.p50_us = stats::Quantile(ns, 0.5) * 1e-3;
-  l.p99_us = stats::Quantile(ns, 0.99) * 1e-3;
-  return l;
 }
 
 Evaluation Evaluate(const Prepared& p, const Predictions& pred, const patch::PatchSpec& spec, double gate_n) {

@@ -10,6 +10,12 @@
 
 namespace ruffini::eval {
 
+decode::BaselineConfig BaselineConfigFor(const dataset::Dataset& data, const decode::BaselineConfig& config) {
+  decode::BaselineConfig cfg = config;
+  cfg.sample_rate_hz = data.info.sample_rate_hz;
+  return cfg;
+}
+
 Prepared PrepareFrames(const dataset::Dataset& d, const decode::BaselineConfig& config) {
   Prepared p;
   const std::size_t n = d.size();
@@ -22,9 +28,7 @@ Prepared PrepareFrames(const dataset::Dataset& d, const decode::BaselineConfig& 
   p.surface_radius_mm = d.info.surface_radius_mm;
   p.patch_name = d.info.patch_name;
   p.source = d.info.source;
-  decode::BaselineConfig cfg = config;
-  cfg.sample_rate_hz = d.info.sample_rate_hz;
-  decode::BaselineTracker tracker(cfg);
+  decode::BaselineTracker tracker(BaselineConfigFor(d, config));
   decode::Wavelengths wl;
   for (std::size_t k = 0; k < n; ++k) {
     for (std::size_t i = 0; i < decode::kGratings; ++i) wl[i] = d.wavelength_nm[k][i];

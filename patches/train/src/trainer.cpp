@@ -19,95 +19,13 @@
 #include "ruffini/error.h"
 #include "ruffini/patch/geometry.h"
 #include "ruffini/stats.h"
+#include "export.h"
+#include "nets.h"
 
 namespace ruffini::train {
 namespace {
 
-constexpr int kG = 16;
-
-struct ForceNetImpl : torch::nn::Module {
-  explicit ForceNetImpl(int window) {
-    for (int k = 0; k < 3; ++k) {
-      convs.push_back(register_module("conv" + std::to_string(k),
-                                      torch::nn::Conv1d(torch::nn::Conv1dOptions(k == 0 ? window : 16, 16, 16))));
-    }
-    fc1 = register_module("fc1", torch::nn::Linear(32, 100));
-    fc2 = register_module("fc2", torch::nn::Linear(100, 1));
-  }
-  torch::Tensor forward(torch::Tensor x) {  // [N, W, 16]
-    // 'same' padding written out (7 zeros before, 8 after, as PyTorch's padding='same' does for kernel 16),
-    // which the runtime mirrors with pad_left = 7.
-    for (auto& c : convs) x = torch::max_pool1d(torch::relu(c->forward(torch::constant_pad_nd(x, {7, 8}))), 2);
-    return fc2->forward(torch::relu(fc1->forward(x.flatten(1))));
-  }
-  std::vector<torch::nn::Conv1d> convs;
-  torch::nn::Linear fc1{nullptr}, fc2{nullptr};
-};
-TORCH_MODULE(ForceNet);
-
-struct MlpImpl : torch::nn::Module {
-  MlpImpl(const std::vector<int>& w, int classes, double dropout) {
-    l1 = register_module("l1", torch::nn::Linear(kG, w[0]));
-    l2 = register_module("l2", torch::nn::Linear(w[0], w[1]));
-    drop = register_module("drop", torch::nn::Dropout(dropout));
-    l3 = register_module("l3", torch::nn::Linear(w[1], w[2]));
-    out = register_module("out", torch::nn::Linear(w[2], classes));
-  }
-  torch::Tensor forward(torch::Tensor x) {
-    x = torch::relu(l1->forward(x));
-    x = drop->forward(torch::relu(l2->forward(x)));
-    return out->forward(torch::relu(l3->forward(x)));
-  }
-  torch::nn::Linear l1{nullptr}, l2{nullptr}, l3{nullptr}, out{nullptr};
-  torch::nn::Dropout drop{nullptr};
-};
-TORCH_MODULE(Mlp);
-
-// The four grid MLPs trained as one module: every layer's weights stacked along a leading grid axis and
-// applied with one batched matrix product, so a training step costs the framework overhead of one small
-// MLP instead of four (the nets are tiny, and per-operation overhead, not arithmetic, dominated). The losses
-// are summed, so each net's gradient is the one it would get alone. Output layers are padded to the largest
-// grid; padded logits are pushed to -1e9 and never targeted. Exported as four separate nets.
-struct MlpBankImpl : torch::nn::Module {
-  MlpBankImpl(const std::vector<int>& w, const std::vector<int>& classes, double dropout_p, at::Generator generator)
-      : dropout(dropout_p), gen(std::move(generator)) {
-    const auto nets = static_cast<long>(classes.size());
-    const long widest = *std::max_element(classes.begin(), classes.end());
-    const std::array<long, 5> dims = {kG, w[0], w[1], w[2], widest};
-    for (std::size_t k = 0; k < 4; ++k) {
-      // PyTorch's Linear default: weights and biases uniform in +-1/sqrt(fan_in).
-      const double bound = 1.0 / std::sqrt(static_cast<double>(dims[k]));
-      const std::string index = std::to_string(k);  // (appending, not "w" + ...: GCC 12's -Wrestrict false positive)
-      std::string w_name = "w", b_name = "b";
-      w_name += index;
-      b_name += index;
-      weights.push_back(register_parameter(w_name, torch::empty({nets, dims[k], dims[k + 1]}).uniform_(-bound, bound, gen)));
-      biases.push_back(register_parameter(b_name, torch::empty({nets, 1, dims[k + 1]}).uniform_(-bound, bound, gen)));
-    }
-    mask = torch::zeros({nets, 1, widest});
-    for (long g = 0; g < nets; ++g) mask[g].narrow(1, classes[static_cast<std::size_t>(g)], widest - classes[static_cast<std::size_t>(g)]).fill_(-1e9);
-    mask = register_buffer("mask", mask);
-  }
-  // x [N, 16] -> logits [nets, N, widest], padded entries at -1e9.
-  torch::Tensor forward(const torch::Tensor& x) {
-    auto h = x.unsqueeze(0).expand({weights[0].size(0), x.size(0), x.size(1)});
-    for (std::size_t k = 0; k < 4; ++k) {
-      h = torch::baddbmm(biases[k], h, weights[k]);
-      if (k < 3) h = torch::relu(h);
-      if (k == 1 && is_training() && dropout > 0) {  // the one dropout layer, after the second
-        // Inverted dropout with this fit's own generator (fits run in parallel; the global one would make
-        // the masks depend on thread timing).
-        h = h * torch::empty_like(h).bernoulli_(1.0 - dropout, gen) / (1.0 - dropout);
-      }
-    }
-    return h + mask;
-  }
-  std::vector<torch::Tensor> weights, biases;
-  torch::Tensor mask;
-  double dropout;
-  at::Generator gen;
-};
-TORCH_MODULE(MlpBank);
+using namespace detail;  // the nets (nets.h) and their export (export.h)
 
 // Modules initialise from the global generator: build them one at a time, reseeded, so a fit's initial
 // weights depend on its seed only, whichever thread builds it when.
@@ -115,10 +33,6 @@ std::mutex& InitMutex() {
   static std::mutex m;
   return m;
 }
-
-struct Norm {
-  std::array<float, kG> mean{}, std{};
-};
 
 using Frame16 = std::array<float, kG>;
 
@@ -206,12 +120,7 @@ class Trainer {
     }
   }
 
-  struct Nets {
-    ForceNet force{nullptr};
-    MlpBank mlps{nullptr};
-    Norm force_norm, loc_norm;
-    float f_mean = 0, f_std = 1;
-  };
+  using Nets = FitNets;
 
   Nets Fit(const Pools& pools, const std::string& phase) {
     Nets n;
@@ -309,68 +218,10 @@ class Trainer {
     return out;
   }
 
+  // The nets into the model file (export.cpp), with golden vectors: libtorch's outputs for a few held-out
+  // frames in contact.
   void Export(Nets& n, const Pools& test_pools, v1::DecoderModel& m) {
-    auto put = [](v1::Tensor* t, const torch::Tensor& x) {
-      const auto c = x.detach().contiguous().to(torch::kFloat);
-      for (auto d : c.sizes()) t->add_shape(static_cast<std::uint32_t>(d));
-      t->mutable_values()->Add(c.data_ptr<float>(), c.data_ptr<float>() + c.numel());
-    };
-    auto norm = [](v1::Normalization* out, const Norm& nm) {
-      for (int i = 0; i < kG; ++i) {
-        out->add_mean(nm.mean[static_cast<std::size_t>(i)]);
-        out->add_std(nm.std[static_cast<std::size_t>(i)]);
-      }
-    };
-    auto* fn = m.mutable_force();
-    fn->set_window(static_cast<std::uint32_t>(o_.window));
-    norm(fn->mutable_input(), n.force_norm);
-    for (auto& c : n.force->convs) {
-      auto* l = fn->add_conv();
-      put(l->mutable_weight(), c->weight);
-      put(l->mutable_bias(), c->bias);
-      l->set_pad_left(7);  // PyTorch 'same' for kernel 16: 15 zeros, 7 before and 8 after
-      l->set_pool(2);
-    }
-    for (auto* lin : {&n.force->fc1, &n.force->fc2}) {
-      auto* d = fn->add_dense();
-      put(d->mutable_weight(), (*lin)->weight);
-      put(d->mutable_bias(), (*lin)->bias);
-      d->set_relu(lin == &n.force->fc1);
-    }
-    fn->set_output_scale_n(n.f_std);
-    fn->set_output_offset_n(n.f_mean);
-    for (std::size_t g = 0; g < grids_.size(); ++g) {
-      auto* ln = m.add_location();
-      auto* gr = ln->mutable_grid();
-      gr->set_name(grids_[g].name);
-      gr->set_y0_mm(grids_[g].y0_mm);
-      gr->set_r0_deg(grids_[g].r0_deg);
-      gr->set_cell_y_mm(grids_[g].cell_y_mm);
-      gr->set_cell_r_deg(grids_[g].cell_r_deg);
-      gr->set_ny(static_cast<std::uint32_t>(grids_[g].ny));
-      gr->set_nr(static_cast<std::uint32_t>(grids_[g].nr));
-      norm(ln->mutable_input(), n.loc_norm);
-      if (o_.location_input == "unit") {
-        ln->set_input_kind(v1::LocationNet::UNIT);
-        ln->set_unit_floor_pm(static_cast<float>(o_.unit_floor_pm));
-      }
-      for (std::size_t k = 0; k < 4; ++k) {
-        // Stacked [in, out] -> a Linear's [out, in]; the output layer loses its padding.
-        auto w = n.mlps->weights[k][static_cast<long>(g)].t();
-        auto b = n.mlps->biases[k][static_cast<long>(g)][0];
-        if (k == 3) {
-          w = w.narrow(0, 0, grids_[g].classes());
-          b = b.narrow(0, 0, grids_[g].classes());
-        }
-        auto* d = ln->add_dense();
-        put(d->mutable_weight(), w);
-        put(d->mutable_bias(), b);
-        d->set_relu(k < 3);
-      }
-    }
-    m.mutable_gating()->set_on_n(static_cast<float>(o_.gate_n));
-    m.mutable_gating()->set_off_n(static_cast<float>(0.8 * o_.gate_n));
-    // Golden vectors: libtorch's outputs for a few held-out frames in contact.
+    ExportNets(n, grids_, o_, m);
     std::vector<std::uint32_t> picks;
     for (auto f : test_pools.gated) {
       if (p_.force_n[f] > 0.3f) picks.push_back(f);
@@ -380,25 +231,20 @@ class Trainer {
     n.force->eval();
     const auto probs = LocProbabilities(n, picks);
     const decode::Nip all(grids_);
+    std::vector<float> window;
     for (std::size_t j = 0; j < picks.size(); ++j) {
-      auto* gv = m.add_golden();
       const std::uint32_t f = picks[j];
+      window.clear();
       for (int t = 0; t < o_.window; ++t) {
         const auto back = static_cast<std::size_t>(o_.window - 1 - t);
         const std::size_t src = f >= start_of_[f] + back ? f - back : start_of_[f];  // as ForceInput does
         for (int i = 0; i < kG; ++i) {
           const float v = p_.shift_pm[src][static_cast<std::size_t>(i)];
-          gv->add_window_shift_pm(std::isfinite(v) ? v : n.force_norm.mean[static_cast<std::size_t>(i)]);
+          window.push_back(std::isfinite(v) ? v : n.force_norm.mean[static_cast<std::size_t>(i)]);
         }
       }
       const auto y = n.force->forward(ForceInput({f}, n.force_norm)).item<float>() * n.f_std + n.f_mean;
-      gv->set_force_n(y);
-      const float* pj = probs.data() + j * all.inputs();
-      gv->mutable_probabilities()->Add(pj, pj + all.inputs());
-      double yy = 0, rr = 0;
-      all.Locate(std::span<const float>(pj, all.inputs()), yy, rr);
-      gv->set_y_mm(yy);
-      gv->set_r_deg(rr);
+      AddGoldenVector(window, y, std::span<const float>(probs.data() + j * all.inputs(), all.inputs()), all, m);
     }
     n.force->train();
   }
@@ -614,98 +460,6 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
   info->set_tool_version("ruffini 0.1.0, libtorch " TORCH_VERSION);
   info->set_seconds(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   return m;
-}
-
-struct TorchForceNet::Impl {
-  ForceNet net{nullptr};
-  std::vector<Mlp> mlps;
-  std::vector<Norm> mlp_norms;
-  std::vector<float> unit_floor;  // 0: RAW input
-  torch::Tensor loc_x;
-  int window = 1;
-  std::array<float, kG> mean{}, inv_std{};
-  float scale = 1, offset = 0;
-  torch::Tensor x;
-};
-
-TorchForceNet::TorchForceNet(const v1::DecoderModel& m) : impl_(new Impl) {
-  const auto& f = m.force();
-  impl_->window = static_cast<int>(f.window());
-  impl_->net = ForceNet(impl_->window);
-  torch::NoGradGuard no_grad;
-  auto load = [](torch::Tensor& t, const v1::Tensor& src) {
-    t.copy_(torch::from_blob(const_cast<float*>(src.values().data()), t.sizes(), torch::kFloat));
-  };
-  for (int k = 0; k < 3; ++k) {
-    load(impl_->net->convs[static_cast<std::size_t>(k)]->weight, f.conv(k).weight());
-    load(impl_->net->convs[static_cast<std::size_t>(k)]->bias, f.conv(k).bias());
-  }
-  load(impl_->net->fc1->weight, f.dense(0).weight());
-  load(impl_->net->fc1->bias, f.dense(0).bias());
-  load(impl_->net->fc2->weight, f.dense(1).weight());
-  load(impl_->net->fc2->bias, f.dense(1).bias());
-  impl_->net->eval();
-  for (int i = 0; i < kG; ++i) {
-    impl_->mean[static_cast<std::size_t>(i)] = f.input().mean(i);
-    impl_->inv_std[static_cast<std::size_t>(i)] = 1.0f / f.input().std(i);
-  }
-  impl_->scale = f.output_scale_n();
-  impl_->offset = f.output_offset_n();
-  impl_->x = torch::empty({1, impl_->window, kG});
-  for (const auto& ln : m.location()) {
-    std::vector<int> widths;
-    for (int k = 0; k < 3; ++k) widths.push_back(static_cast<int>(ln.dense(k).weight().shape(0)));
-    Mlp mlp(widths, static_cast<int>(ln.grid().ny() * ln.grid().nr()), 0.0);
-    int k = 0;
-    for (auto* lin : {&mlp->l1, &mlp->l2, &mlp->l3, &mlp->out}) {
-      load((*lin)->weight, ln.dense(k).weight());
-      load((*lin)->bias, ln.dense(k).bias());
-      ++k;
-    }
-    mlp->eval();
-    Norm nm;
-    for (int i = 0; i < kG; ++i) {
-      nm.mean[static_cast<std::size_t>(i)] = ln.input().mean(i);
-      nm.std[static_cast<std::size_t>(i)] = ln.input().std(i);
-    }
-    impl_->mlps.push_back(mlp);
-    impl_->mlp_norms.push_back(nm);
-    impl_->unit_floor.push_back(ln.input_kind() == v1::LocationNet::UNIT ? ln.unit_floor_pm() : 0.0f);
-  }
-  impl_->loc_x = torch::empty({1, kG});
-}
-
-void TorchForceNet::Locate(const float* s, std::vector<float>& out) {
-  torch::NoGradGuard no_grad;
-  out.clear();
-  for (std::size_t g = 0; g < impl_->mlps.size(); ++g) {
-    float* d = impl_->loc_x.data_ptr<float>();
-    float scale = 1.0f;
-    if (impl_->unit_floor[g] > 0.0f) {
-      double n2 = 0;
-      for (std::size_t i = 0; i < static_cast<std::size_t>(kG); ++i) n2 += static_cast<double>(s[i]) * s[i];
-      scale = 1.0f / std::max(static_cast<float>(std::sqrt(n2)), impl_->unit_floor[g]);
-    }
-    for (std::size_t i = 0; i < static_cast<std::size_t>(kG); ++i) {
-      d[i] = (s[i] * scale - impl_->mlp_norms[g].mean[i]) / impl_->mlp_norms[g].std[i];
-    }
-    const auto p = torch::softmax(impl_->mlps[g]->forward(impl_->loc_x), 1).contiguous();
-    out.insert(out.end(), p.data_ptr<float>(), p.data_ptr<float>() + p.numel());
-  }
-}
-
-TorchForceNet::~TorchForceNet() { delete impl_; }
-
-float TorchForceNet::Forward(const float* w) {
-  torch::NoGradGuard no_grad;
-  float* d = impl_->x.data_ptr<float>();
-  for (int t = 0; t < impl_->window; ++t) {
-    for (int i = 0; i < kG; ++i) {
-      const auto ui = static_cast<std::size_t>(i);
-      d[t * kG + i] = (w[t * kG + i] - impl_->mean[ui]) * impl_->inv_std[ui];
-    }
-  }
-  return impl_->net->forward(impl_->x).item<float>() * impl_->scale + impl_->offset;
 }
 
 }  // namespace ruffini::train

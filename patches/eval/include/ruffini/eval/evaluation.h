@@ -63,14 +63,7 @@ struct Predictions {
 Predictions RunDecoder(FrameDecoder& decoder, const Prepared& data, const std::vector<std::int32_t>& test_ids,
                        const std::function<void(std::uint64_t, std::uint64_t)>& progress = {}, bool test_only = false);
 
-struct Latency {
-  double p50_us = 0, p99_us = 0, mean_us = 0;
-  std::size_t frames = 0;
-};
-// Times Decode() frame by frame (single thread, steady clock) over up to max_frames test frames, in stream
-// order with the same resets as RunDecoder.
-Latency MeasureLatency(FrameDecoder& decoder, const Prepared& data, const std::vector<std::int32_t>& test_ids,
-                       std::size_t max_frames);
+// Latency: ruffini/eval/bench.h.
 
 struct BinStats {
   double lo, hi;

@@ -25,7 +25,10 @@ struct Prepared {
   [[nodiscard]] std::size_t size() const { return force_n.size(); }
 };
 
-// Runs the baseline tracker over the frames in order. Indentation frames must be contiguous per index.
+// The baseline tracker's config for a dataset: `config` at the dataset's sample rate.
+decode::BaselineConfig BaselineConfigFor(const dataset::Dataset& data, const decode::BaselineConfig& config = {});
+
+// Runs the baseline tracker (BaselineConfigFor) over the frames in order. Indentation frames must be contiguous per index.
 Prepared PrepareFrames(const dataset::Dataset& data, const decode::BaselineConfig& config = {});
 
 struct Split {

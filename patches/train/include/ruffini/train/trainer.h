@@ -52,19 +52,6 @@ using TrainProgress = std::function<void(const std::string& phase, int epoch, in
 v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec, const TrainOptions& options,
                        const std::string& dataset_path, const TrainProgress& progress = {});
 
-// libtorch eager inference of a model's nets, batch 1 (for the speed comparison in `bench`).
-class TorchForceNet {
- public:
-  explicit TorchForceNet(const v1::DecoderModel& model);
-  ~TorchForceNet();
-  TorchForceNet(const TorchForceNet&) = delete;
-  TorchForceNet& operator=(const TorchForceNet&) = delete;
-  float Forward(const float* window_shift_pm);  // W x 16, oldest first
-  // Every location net's softmax for one frame, concatenated (written into probabilities).
-  void Locate(const float* shift_pm, std::vector<float>& probabilities);
- private:
-  struct Impl;
-  Impl* impl_;
-};
+// libtorch inference of a trained model (eager and frozen TorchScript): ruffini/train/torch_decoder.h.
 
 }  // namespace ruffini::train

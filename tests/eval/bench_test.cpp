@@ -1,0 +1,184 @@
+// The bench (eval::RunBench and its writer) on twin data with a hand-built model: the timed step replays the
+// stream from raw wavelengths exactly, frames are split into gated and ungated, warm-up is not timed, the
+// Eigen-vs-libtorch ratio names the fastest libtorch row, and the report has its columns. No timing goal here
+// (speed goals live in benchmarks): only the bookkeeping around the clock.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "../decode/synthetic_model.h"
+#include "ruffini/error.h"
+#include "ruffini/eval/bench.h"
+#include "ruffini/eval/bench_report.h"
+#include "ruffini/twin/protocols.h"
+#include "ruffini/twin/scene.h"
+
+namespace ruffini::eval {
+namespace {
+
+struct Fixture {
+  twin::Scene scene = twin::LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml");
+  dataset::Dataset data;
+  Prepared prepared;
+  v1::DecoderModel model;
+  std::vector<std::int32_t> test;
+  Fixture() {
+    const twin::SkinTwin t(scene.Patch().spec, scene.effects, {scene.probe.radius_mm});
+    data.info = twin::TwinDatasetInfo(t, scene, "paper", 4, 100.0);
+    twin::PaperProtocol p;
+    p.indentations = 40;
+    twin::RunPaper(t, scene, p, 4, [&](std::span<const dataset::Frame> f) {
+      for (const auto& x : f) data.Append(x);
+    });
+    prepared = PrepareFrames(data);
+    model = decode::testing::SyntheticModel(scene.Patch().spec, 4);
+    for (std::size_t i = 0; i < prepared.ids.size(); i += 5) test.push_back(prepared.ids[i]);  // 8 of 40
+    for (auto id : test) model.add_test_indentations(static_cast<std::uint32_t>(id));
+  }
+};
+
+const Fixture& F() {
+  static const Fixture f;
+  return f;
+}
+
+// Records what the decoder is fed (and decodes it with the runtime).
+class Recording final : public FrameDecoder {
+ public:
+  explicit Recording(const v1::DecoderModel& m) : inner_(m) {}
+  void Reset(const decode::ShiftsPm* fill) override {
+    ++resets;
+    inner_.Reset(fill);
+  }
+  decode::DecodeOutput Decode(const decode::ShiftsPm& s) override {
+    seen.push_back(s);
+    return inner_.Decode(s);
+  }
+  std::vector<decode::ShiftsPm> seen;
+  int resets = 0;
+
+ private:
+  NetworkFrameDecoder<float> inner_;
+};
+
+bool SameBits(const decode::ShiftsPm& a, const decode::ShiftsPm& b) { return std::memcmp(a.data(), b.data(), sizeof a) == 0; }
+
+// From the stretch's tracker state, the baseline update inside the timed step gives the very shifts the
+// errors are computed from (PrepareFrames), frame for frame, bit for bit.
+TEST(BenchTest, TimedStepReplaysThePreparedShifts) {
+  const auto stretches = TestStretches(F().data, F().prepared, F().test);
+  ASSERT_EQ(stretches.size(), F().test.size());
+  Recording rec(F().model);
+  BaselineThenDecode step(rec);
+  std::size_t frames = 0;
+  for (const auto& s : stretches) {
+    ASSERT_LT(s.first, s.last);
+    step.Reset(s.baseline, F().prepared.shift_pm[s.first]);
+    rec.seen.clear();
+    for (std::size_t k = s.first; k < s.last; ++k) (void)step.Step(F().data.wavelength_nm[k]);
+    ASSERT_EQ(rec.seen.size(), s.last - s.first);
+    for (std::size_t k = s.first; k < s.last; ++k, ++frames) {
+      ASSERT_TRUE(SameBits(rec.seen[k - s.first], F().prepared.shift_pm[k])) << "frame " << k;
+    }
+  }
+  EXPECT_GT(frames, 1000u);
+  // A stretch started from a fresh tracker (no baseline yet) would not reproduce them.
+  Recording fresh(F().model);
+  BaselineThenDecode wrong(fresh);
+  wrong.Reset(decode::BaselineTracker(BaselineConfigFor(F().data)), F().prepared.shift_pm[stretches[0].first]);
+  (void)wrong.Step(F().data.wavelength_nm[stretches[0].first]);
+  EXPECT_FALSE(SameBits(fresh.seen[0], F().prepared.shift_pm[stretches[0].first]));
+}
+
+// Counts calls: warm-up runs first, untimed, and each stretch starts with a reset.
+class CountingStep final : public FrameStep {
+ public:
+  void Reset(const decode::BaselineTracker&, const decode::ShiftsPm&) override { ++resets; }
+  decode::DecodeOutput Step(const decode::Wavelengths&) override {
+    decode::DecodeOutput o;
+    o.located = (steps++ % 4) == 0;  // one frame in four "gated"
+    return o;
+  }
+  std::size_t steps = 0, resets = 0;
+};
+
+TEST(BenchTest, WarmupIsRunButNotTimed) {
+  const auto stretches = TestStretches(F().data, F().prepared, F().test);
+  CountingStep step;
+  const FrameLatency l = MeasureFrameLatency(step, F().data, F().prepared, stretches, 1500, 300);
+  EXPECT_EQ(step.steps, 1800u);
+  EXPECT_EQ(l.all.frames, 1500u);
+  EXPECT_EQ(l.gated.frames + l.ungated.frames, 1500u);
+  EXPECT_EQ(l.gated.frames, 375u);  // steps 300..1799: every fourth
+  EXPECT_GE(step.resets, 2u);
+  EXPECT_LE(l.all.p50_us, l.all.p99_us);
+}
+
+TEST(BenchTest, RunBenchRowsRatiosAndReport) {
+  BenchOptions o;
+  o.frames = 2000;
+  o.warmup_frames = 200;
+  o.inversion_iterations = {1};
+  // Two stand-ins for libtorch on the same weights: their rows, and the ratio to the faster one.
+  o.extra = [](const v1::DecoderModel& m) {
+    std::vector<BenchDecoder> v;
+    v.push_back({"stand-in double", Runtime::kLibtorch, std::make_unique<NetworkFrameDecoder<double>>(m)});
+    v.push_back({"stand-in float", Runtime::kLibtorch, std::make_unique<NetworkFrameDecoder<float>>(m)});
+    return v;
+  };
+  const BenchResult r = RunBench({F().model}, F().data, F().scene.Patch().spec, o);
+  ASSERT_EQ(r.rows.size(), 2u + 4u + 2u + 1u);
+  EXPECT_EQ(r.rows[0].configuration, "paper pipeline, NIP union, float");
+  EXPECT_EQ(r.rows[0].weights, WeightsTag(F().model));
+  EXPECT_EQ(r.rows[0].weights.substr(0, 9), "W=4, MLP ");
+  EXPECT_EQ(r.rows[6].runtime, Runtime::kLibtorch);
+  EXPECT_EQ(r.rows.back().runtime, Runtime::kInversion);
+  EXPECT_TRUE(r.rows.back().weights.empty());
+  for (const auto& row : r.rows) {
+    EXPECT_EQ(row.latency.all.frames, 2000u) << row.configuration;
+    EXPECT_EQ(row.latency.gated.frames + row.latency.ungated.frames, 2000u) << row.configuration;
+    EXPECT_LE(row.latency.gated.p50_us, row.latency.gated.p99_us);
+    EXPECT_LE(row.latency.ungated.p50_us, row.latency.ungated.p99_us);
+  }
+  // The twin's indentations start and end untouched: both kinds of frames are timed.
+  EXPECT_GT(r.rows[0].latency.gated.frames, 0u);
+  EXPECT_GT(r.rows[0].latency.ungated.frames, 0u);
+  // Same weights, same errors.
+  EXPECT_NEAR(r.rows[6].force_error_median_mn, r.rows[0].force_error_median_mn, 1e-3);
+  EXPECT_NEAR(r.rows[7].location_error_median_mm, r.rows[0].location_error_median_mm, 1e-3);
+  ASSERT_EQ(r.ratios.size(), 1u);
+  const BenchRatio& q = r.ratios[0];
+  EXPECT_EQ(q.eigen_row, 0u);
+  const double g6 = r.rows[6].latency.gated.p50_us, g7 = r.rows[7].latency.gated.p50_us;
+  EXPECT_EQ(q.best_gated_row, g7 < g6 ? 7u : 6u);
+  EXPECT_DOUBLE_EQ(q.gated, r.rows[q.best_gated_row].latency.gated.p50_us / r.rows[0].latency.gated.p50_us);
+  EXPECT_DOUBLE_EQ(q.ungated, r.rows[q.best_ungated_row].latency.ungated.p50_us / r.rows[0].latency.ungated.p50_us);
+
+  const auto dir = std::filesystem::temp_directory_path() / "ruffini_bench_test";
+  std::filesystem::remove_all(dir);
+  WriteBench(r, dir.string(), "ruffini bench --model m.rmodel --data d.h5");
+  std::ifstream in(dir / "bench.md");
+  std::stringstream md;
+  md << in.rdbuf();
+  for (const char* must : {"Reproduce: `ruffini bench --model m.rmodel --data d.h5`", "| ungated p50 (us) | ungated p99 (us) | gated p50 (us) | gated p99 (us) |",
+                           "| 7 | stand-in double (W=4", "| 9 | inversion, LM 1 iteration |", "Eigen vs best libtorch (W=4", "![Pareto](pareto.svg)"}) {
+    EXPECT_NE(md.str().find(must), std::string::npos) << must;
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "pareto.svg"));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(BenchTest, RejectsForeignPreparedFramesAndNoModel) {
+  Prepared other = F().prepared;
+  other.shift_pm.pop_back();
+  other.force_n.pop_back();
+  EXPECT_THROW(TestStretches(F().data, other, F().test), InputError);
+  EXPECT_THROW(RunBench({}, F().data, F().scene.Patch().spec, {}), InputError);
+}
+
+}  // namespace
+}  // namespace ruffini::eval
