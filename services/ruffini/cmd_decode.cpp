@@ -59,6 +59,9 @@ void RegisterTrain(CLI::App& app) {
   cmd->add_option("--label-sigma-mm", a->o.label_sigma_mm,
                   "Location labels: 0 = one cell (the paper's); > 0 = each cell's share of a Gaussian of this sigma")
       ->check(CLI::Range(0.0, 100.0))->capture_default_str();
+  cmd->add_option("--drift-augment-pm", a->o.drift_augment_pm,
+                  "Training only: per-sample per-grating offsets of this sigma (pm, median removed), for robustness to field drift")
+      ->check(CLI::Range(0.0, 100.0))->capture_default_str();
   cmd->add_option("--unit-floor-pm", a->o.unit_floor_pm, "unit: norms below this (pm) are taken as this")
       ->check(CLI::Range(1e-3, 1e3))->capture_default_str();
   cmd->add_option("--folds", a->o.folds, "Cross-validation folds inside the training part (0 = none)")->check(CLI::Range(0, 20))->capture_default_str();
@@ -156,8 +159,8 @@ void RegisterEvaluate(CLI::App& app) {
       ->required()->check(CLI::ExistingFile);
   cmd->add_option("--report", a->report, "Report folder (report.md, pictures, predictions.h5)")->required();
   cmd->add_option("--also", a->also, "More datasets scored as rows of the field table: LABEL=FILE.h5 (other casts, field protocol)");
-  cmd->add_option("--inversion,!--no-inversion", a->inversion, "Also score the inversion decoder (training data only)")->capture_default_str();
-  cmd->add_option("--gate-freeze,!--no-gate-freeze", a->gate_freeze,
+  cmd->add_flag("--inversion,!--no-inversion", a->inversion, "Also score the inversion decoder (training data only)")->capture_default_str();
+  cmd->add_flag("--gate-freeze,!--no-gate-freeze", a->gate_freeze,
                   "The decoder's gate freezes the baseline (--no-gate-freeze: only large shifts do, the old tracker)")
       ->capture_default_str();
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
@@ -324,7 +327,7 @@ void RegisterDecode(CLI::App& app) {
 
 void RegisterCalibrate(CLI::App& app) {
   struct Args {
-    std::string model, data, out, patch_spec = RUFFINI_DEFAULT_PATCH;
+    std::string model, data, out, creep_data, patch_spec = RUFFINI_DEFAULT_PATCH;
     int indentations = 100;
     bool gains = true;
     int sweeps = 3;
@@ -339,7 +342,10 @@ void RegisterCalibrate(CLI::App& app) {
   cmd->add_option("--out", a->out, "Calibrated model file to write")->required();
   cmd->add_option("--indentations", a->indentations, "Use the recording's first N indentations (0 = all)")
       ->check(CLI::Range(0, 1000000))->capture_default_str();
-  cmd->add_option("--gains,!--no-gains", a->gains, "Fit per-grating gains (cast adaptation)")->capture_default_str();
+  cmd->add_flag("--gains,!--no-gains", a->gains, "Fit per-grating gains (cast adaptation)")->capture_default_str();
+  cmd->add_option("--creep-data", a->creep_data,
+                  "A press-hold-release recording of the cast (e.g. --protocol field) to fit the creep compensation")
+      ->check(CLI::ExistingFile);
   cmd->add_option("--sweeps", a->sweeps, "Coordinate sweeps of the gain fit")->check(CLI::Range(1, 20))->capture_default_str();
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
@@ -357,6 +363,12 @@ void RegisterCalibrate(CLI::App& app) {
       cc->clear_grating_gain();
       for (float v : g.gain) cc->add_grating_gain(v);
       std::printf("gains fitted: objective %.2f -> %.2f (%d evaluations)\n", g.before, g.after, g.evaluations);
+    }
+    if (!a->creep_data.empty()) {
+      const dataset::Dataset creep = dataset::ReadDataset(a->creep_data);
+      if (creep.info.patch_name != m.patch_name()) throw InputError(a->creep_data + ": dataset is from patch '" + creep.info.patch_name + "'");
+      *m.mutable_creep() = eval::FitCreep(m, md.spec, creep);
+      std::printf("creep compensation: g = %.4f / %.4f / %.4f at tau 1 / 10 / 100 s\n", m.creep().g(0), m.creep().g(1), m.creep().g(2));
     }
     *m.mutable_input_range() = eval::FitInputRange(m, md.spec, cal);
     *m.mutable_uncertainty() = eval::FitUncertainty(m, md.spec, cal);

@@ -173,13 +173,13 @@ TEST(BaselineTest, CapturesThenFollowsUniformDriftWhilePressedAndNeverEatsAWeakP
   EXPECT_EQ(t.state(), BaselineTracker::State::kTracking);
   // A weak press between gratings: 1.5 pm on one grating (below touch_on, so the shifts alone never freeze
   // the baseline), held 120 s while the temperature ramps at 10 C/h (0.028 pm/s on every grating). The
-  // decoder's gate says "touched" (hold = true): the press must survive at full size and the drift must not
+  // decoder's gate is open: the press must survive at full size and the drift must not
   // show (common mode removed).
   wl[5] += 0.0015;
   const double ramp_nm_per_frame = 10.0 / 3600.0 * 10e-3 / c.sample_rate_hz;
   for (int k = 0; k < 12000; ++k) {
     for (auto& w : wl) w += ramp_nm_per_frame;
-    ASSERT_TRUE(t.Update(wl, s, /*hold=*/true));
+    ASSERT_TRUE(t.Update(wl, s, BaselineTracker::Gate::kOpen));
   }
   EXPECT_EQ(t.state(), BaselineTracker::State::kFrozen);
   EXPECT_NEAR(s[5], 1.5f, 0.05f);  // not eaten
@@ -194,7 +194,7 @@ TEST(BaselineTest, CapturesThenFollowsUniformDriftWhilePressedAndNeverEatsAWeakP
   EXPECT_NEAR(t.common_mode_pm(), 0.028f, 0.02f);
   EXPECT_NEAR(t.frozen_s(), 120.0, 0.02);
   EXPECT_FALSE(t.stale());
-  // Without the gate's hold the same weak press is slowly absorbed by the 30 s filter: this is why the
+  // Shift-driven (no gate) the same weak press is slowly absorbed by the 30 s filter: this is why the
   // pipeline feeds the gate back. (Measured, so the test fails if the filter stops following.)
   BaselineTracker u(c);
   Wavelengths w2 = Nominal();
@@ -202,9 +202,11 @@ TEST(BaselineTest, CapturesThenFollowsUniformDriftWhilePressedAndNeverEatsAWeakP
   w2[5] += 0.0015;
   for (int k = 0; k < 12000; ++k) u.Update(w2, s);
   EXPECT_LT(s[5], 0.1f);
-  // Release (no hold, quiet): tracking again after release_frames.
-  wl[5] -= 0.0015;
-  for (int k = 0; k < c.release_frames + 1; ++k) t.Update(wl, s);
+  // Gate closed: tracking again after release_frames, whatever the shifts (here a 5 pm residual).
+  wl[5] += 0.0035;
+  for (int k = 0; k < c.release_frames - 1; ++k) t.Update(wl, s, BaselineTracker::Gate::kClosed);
+  EXPECT_EQ(t.state(), BaselineTracker::State::kFrozen);
+  t.Update(wl, s, BaselineTracker::Gate::kClosed);
   EXPECT_EQ(t.state(), BaselineTracker::State::kTracking);
   EXPECT_EQ(t.frozen_s(), 0.0);
 }

@@ -7,6 +7,8 @@
 #include <filesystem>
 
 #include "ruffini/eval/evaluation.h"
+#include "ruffini/eval/stream.h"
+#include "ruffini/patch/geometry.h"
 #include "ruffini/patch/spec_loader.h"
 
 namespace ruffini::eval {
@@ -78,6 +80,106 @@ TEST(EvaluateTest, KnownErrorsAndMissedFrames) {
   EXPECT_NEAR(ev.location_error_mm.median, 3.0, 1e-4);
   EXPECT_EQ(ev.location_missed, 1u);
   EXPECT_EQ(ev.location_frames, 96u);
+}
+
+// ScoreStream on constructed data: a rest of 200 frames, then 10 indentations of 100 frames (0..1.98 N).
+dataset::Dataset StreamData() {
+  dataset::Dataset d;
+  d.info.sample_rate_hz = 100.0;
+  auto add = [&](float f, float y, float r, int id) {
+    dataset::Frame fr;
+    fr.t_s = static_cast<double>(d.size()) * 0.01;
+    fr.serial = d.size();
+    fr.force_n = fr.true_force_n = f;
+    fr.y_mm = y;
+    fr.r_deg = r;
+    fr.indentation = id;
+    d.Append(fr);
+  };
+  for (int k = 0; k < 200; ++k) add(0.0f, NAN, NAN, -1);
+  for (int i = 0; i < 10; ++i) {
+    for (int k = 0; k < 100; ++k) add(0.02f * static_cast<float>(k), 30.0f + 8.0f * static_cast<float>(i), 40.0f + 6.0f * static_cast<float>(i), i);
+  }
+  return d;
+}
+
+StreamPredictions PerfectStream(const dataset::Dataset& d) {
+  StreamPredictions p;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const bool on = d.true_force_n[k] > 0.05f;
+    p.force_n.push_back(d.true_force_n[k]);
+    p.force_sd_n.push_back(0.01f);
+    p.y_mm.push_back(on ? d.y_mm[k] : NAN);
+    p.r_deg.push_back(on ? d.r_deg[k] : NAN);
+    for (float c : {1.0f, 0.0f, 1.0f}) p.pos_cov_mm2.push_back(on ? c : NAN);
+    p.confidence.push_back(1.0f);
+    p.common_mode_pm.push_back(0.0f);
+    p.valid.push_back(1);
+    p.located.push_back(on);
+    p.in_contact.push_back(on);
+    p.reason.push_back(0);
+    p.baseline_frozen.push_back(on);
+  }
+  return p;
+}
+
+TEST(ScoreStreamTest, MissesScoreAsFailuresAndFalseContactsCount) {
+  const dataset::Dataset d = StreamData();
+  StreamPredictions p = PerfectStream(d);
+  const patch::SurfacePoint guess{62.5, 72.5};
+  // Indentation 9 (frames 1100..1199): 10 frames above the gate not located, 5 invalid (reason 7).
+  for (std::size_t k = 1150; k < 1160; ++k) p.located[k] = 0;
+  for (std::size_t k = 1160; k < 1165; ++k) {
+    p.valid[k] = 0;
+    p.reason[k] = 7;
+  }
+  // Rest frames 100..119 reported in contact: 20 false contacts.
+  for (std::size_t k = 100; k < 120; ++k) p.in_contact[k] = 1;
+  const StreamMetrics m = ScoreStream(d, p, Spec(), {}, guess);
+  EXPECT_EQ(m.frames, 1200u);
+  EXPECT_EQ(m.invalid, 5u);
+  EXPECT_EQ(m.reasons[7], 5u);
+  EXPECT_EQ(m.above_frames, 10u * 97u);
+  EXPECT_EQ(m.above_missed, 15u);  // not located + invalid
+  // 200 rest frames + each indentation's frames at 0 N and at 0.02 N (as float 0.0199999996 < 0.02): 220.
+  EXPECT_EQ(m.quiet_frames, 220u);
+  EXPECT_EQ(m.false_contacts, 20u);
+  EXPECT_NEAR(m.false_contact_rate, 20.0 / 220.0, 1e-12);
+  // Location with misses as failures: the 15 missed frames score the guess's distance; located-only is 0.
+  EXPECT_DOUBLE_EQ(m.location_located_mm.median, 0.0);
+  EXPECT_NEAR(m.location_above_mm.q3, 0.0, 1e-9);  // 15 of 970 do not move the quartiles...
+  // ...but they count in the miss rate above 100 mN (indentation frames at >= 0.12 N: 94 each).
+  EXPECT_NEAR(m.miss_rate_above_100mn, 15.0 / (10.0 * 94.0), 1e-12);
+  // Scored as the guess: with most frames missed, the median is the guess's distance.
+  StreamPredictions lost = PerfectStream(d);
+  for (std::size_t k = 1100; k < 1200; ++k) lost.located[k] = 0;
+  for (std::size_t k = 200; k < 1100; ++k) lost.located[k] = 0;
+  const StreamMetrics ml = ScoreStream(d, lost, Spec(), MaskOfIndentations(d, {9}), guess);
+  const patch::Geometry geo(Spec().surface_radius_mm);
+  EXPECT_NEAR(ml.location_above_mm.median, geo.SurfaceDistanceMm(guess, {102.0, 94.0}), 1e-4);
+  EXPECT_TRUE(std::isnan(ml.location_located_mm.median));
+  // Invalid frames report 0 N: their force error is the whole force (5 frames at 1.2..1.28 N).
+  StreamPredictions inv = PerfectStream(d);
+  for (std::size_t k = 1100; k < 1200; ++k) inv.valid[k] = 0;
+  const StreamMetrics mi = ScoreStream(d, inv, Spec(), MaskOfIndentations(d, {9}), guess);
+  EXPECT_NEAR(mi.force_all_mn.median, 0.02 * 49.5 * 1e3, 1.0);
+  // Coverage: every in-contact frame is exact, sd 10 mN: 100 % within 1 sd (the 20 false contacts err by 0).
+  EXPECT_DOUBLE_EQ(m.force_within_1sd, 1.0);
+  EXPECT_DOUBLE_EQ(m.position_within_1sd, 1.0);
+  // The longest freeze (97 frames an indentation) against the longest press (98 frames > 20 mN).
+  EXPECT_NEAR(m.longest_frozen_s, 0.97, 1e-9);
+  EXPECT_NEAR(m.longest_press_s, 0.98, 1e-9);
+  // A mask restricts the scored frames, not the stream properties.
+  const StreamMetrics only9 = ScoreStream(d, p, Spec(), MaskOfIndentations(d, {9}), guess);
+  EXPECT_EQ(only9.frames, 100u);
+  EXPECT_EQ(only9.false_contacts, 0u);
+  EXPECT_NEAR(only9.longest_frozen_s, 0.97, 1e-9);
+  // Half the located frames 3 sd off: coverage drops to the share within.
+  StreamPredictions q = PerfectStream(d);
+  for (std::size_t k = 200; k < 1200; k += 2) q.force_n[k] += 0.03f;
+  const StreamMetrics c = ScoreStream(d, q, Spec(), {}, guess);
+  EXPECT_NEAR(c.force_within_1sd, 0.5, 0.01);
+  EXPECT_NEAR(c.force_within_2sd, 0.5, 0.01);
 }
 
 TEST(EvaluateTest, PredictionsFileIsAligned) {

@@ -54,7 +54,7 @@ double BaselineTracker::drift_pm() const noexcept {
   return n > 0 ? sum / n : 0.0;
 }
 
-bool BaselineTracker::Update(const Wavelengths& wl, ShiftsPm& shift, bool hold) noexcept {
+bool BaselineTracker::Update(const Wavelengths& wl, ShiftsPm& shift, Gate gate) noexcept {
   constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
   if (state_ == State::kCapturing) {
     bool quiet = true;
@@ -84,6 +84,17 @@ bool BaselineTracker::Update(const Wavelengths& wl, ShiftsPm& shift, bool hold) 
     return false;
   }
 
+  Measure(wl, shift);
+  Advance(wl, shift, gate);
+  return true;
+}
+
+bool BaselineTracker::Measure(const Wavelengths& wl, ShiftsPm& shift) noexcept {
+  constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+  if (state_ == State::kCapturing) {
+    shift.fill(kNaN);
+    return false;
+  }
   for (std::size_t i = 0; i < kGratings; ++i) {
     shift[i] = std::isfinite(wl[i]) && std::isfinite(baseline_nm_[i]) ? static_cast<float>((wl[i] - baseline_nm_[i]) * 1e3)
                                                                         : kNaN;
@@ -96,16 +107,27 @@ bool BaselineTracker::Update(const Wavelengths& wl, ShiftsPm& shift, bool hold) 
       for (float& v : shift) v -= cm;  // NaN stays NaN
     }
   }
-  double max_abs = 0.0;
-  for (float v : shift) {
-    if (std::isfinite(v)) max_abs = std::max(max_abs, static_cast<double>(std::abs(v)));
-  }
-  if (max_abs > config_.touch_on_pm || hold) {
+  return true;
+}
+
+void BaselineTracker::Advance(const Wavelengths& wl, const ShiftsPm& shift, Gate gate) noexcept {
+  if (gate == Gate::kNone) {
+    double max_abs = 0.0;
+    for (float v : shift) {
+      if (std::isfinite(v)) max_abs = std::max(max_abs, static_cast<double>(std::abs(v)));
+    }
+    if (max_abs > config_.touch_on_pm) {
+      state_ = State::kFrozen;
+      quiet_frames_ = 0;
+    } else if (state_ == State::kFrozen) {
+      quiet_frames_ = max_abs < config_.touch_off_pm ? quiet_frames_ + 1 : 0;
+      if (quiet_frames_ >= config_.release_frames) state_ = State::kTracking;
+    }
+  } else if (gate == Gate::kOpen) {
     state_ = State::kFrozen;
     quiet_frames_ = 0;
-  } else if (state_ == State::kFrozen) {
-    quiet_frames_ = max_abs < config_.touch_off_pm ? quiet_frames_ + 1 : 0;
-    if (quiet_frames_ >= config_.release_frames) state_ = State::kTracking;
+  } else if (state_ == State::kFrozen && ++quiet_frames_ >= config_.release_frames) {
+    state_ = State::kTracking;
   }
   if (state_ == State::kTracking) {
     frozen_frames_ = 0;
@@ -122,7 +144,6 @@ bool BaselineTracker::Update(const Wavelengths& wl, ShiftsPm& shift, bool hold) 
       }
     }
   }
-  return true;
 }
 
 }  // namespace ruffini::decode

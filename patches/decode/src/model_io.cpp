@@ -142,6 +142,19 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
       }
       if (!(std::isfinite(r.margin_pm()) && r.margin_pm() >= 0)) throw InputError("input_range margin_pm must be finite and >= 0");
     }
+    if (m.has_creep()) {
+      const auto& c = m.creep();
+      if (c.g_size() != c.tau_s_size() || c.g_size() > 4) {
+        throw InputError("creep has " + std::to_string(c.g_size()) + " gains and " + std::to_string(c.tau_s_size()) +
+                         " time constants (need equal counts, at most 4)");
+      }
+      for (int k = 0; k < c.g_size(); ++k) {
+        if (!(std::isfinite(c.g(k)) && c.g(k) >= 0 && std::isfinite(c.tau_s(k)) && c.tau_s(k) > 0)) {
+          throw InputError("creep term " + std::to_string(k) + " has g " + std::to_string(c.g(k)) + " and tau_s " +
+                           std::to_string(c.tau_s(k)) + " (need g >= 0, tau_s > 0)");
+        }
+      }
+    }
     if (m.has_uncertainty()) {
       const auto& u = m.uncertainty();
       const int n = u.force_knots_n_size();

@@ -91,6 +91,14 @@ NetworkDecoder<Scalar>::NetworkDecoder(const v1::DecoderModel& m, DecoderOptions
                              static_cast<int>(g.nr())});
   }
   nip_ = std::make_unique<Nip>(grids);
+  if (m.has_creep()) {
+    if (!(options.sample_rate_hz > 0)) throw InputError("decoder option sample_rate_hz must be > 0");
+    creep_terms_ = std::min(4, m.creep().g_size());
+    for (int k = 0; k < creep_terms_; ++k) {
+      creep_g_[static_cast<std::size_t>(k)] = m.creep().g(k);
+      creep_a_[static_cast<std::size_t>(k)] = 1.0 - std::exp(-1.0 / (options.sample_rate_hz * m.creep().tau_s(k)));
+    }
+  }
   gate_on_n_ = m.gating().on_n();
   gate_off_n_ = m.gating().off_n();
 }
@@ -140,6 +148,7 @@ void NetworkDecoder<Scalar>::Reset(Data& d, const ShiftsPm* fill) const noexcept
   d.gate = false;
   d.head = 0;
   d.filled = 0;
+  d.creep_x.fill(0.0);
   if (fill == nullptr) return;
   for (int t = 0; t < window_ - 1; ++t) {
     for (std::size_t i = 0; i < 16; ++i) {
@@ -235,7 +244,23 @@ DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) cons
     d.flat.segment(t * 16, 16) = d.window.row(row).transpose();
   }
   RunForce(d);
-  const Scalar f = d.act.back()[0] * out_scale_ + out_offset_;
+  Scalar f = d.act.back()[0] * out_scale_ + out_offset_;
+  if (creep_terms_ > 0 && std::isfinite(static_cast<double>(f))) {
+    double num = static_cast<double>(f), den = 1.0;
+    for (int k = 0; k < creep_terms_; ++k) {
+      const auto u = static_cast<std::size_t>(k);
+      num -= creep_g_[u] * (1.0 - creep_a_[u]) * d.creep_x[u];
+      den += creep_g_[u] * creep_a_[u];
+    }
+    const double applied = num / den;
+    // The state follows the applied force; never below 0 (the cover is not pulled), so a long negative
+    // excursion of the nets' output cannot wind the filter up.
+    for (int k = 0; k < creep_terms_; ++k) {
+      const auto u = static_cast<std::size_t>(k);
+      d.creep_x[u] += creep_a_[u] * (std::max(0.0, applied) - d.creep_x[u]);
+    }
+    f = static_cast<Scalar>(applied);
+  }
   out.force_n = std::isfinite(static_cast<float>(f)) ? static_cast<float>(f) : 0.0f;
   out.valid = std::isfinite(static_cast<float>(f));
   if (!out.valid) return out;

@@ -37,6 +37,7 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
                            DecoderOptions options)
     : decoder_((CheckModelMatchesPatch(m, spec, "pipeline"), m), [&] {
         options.max_missing = config.max_missing;
+        options.sample_rate_hz = config.baseline.sample_rate_hz;
         return std::move(options);
       }()),
       config_(config) {
@@ -138,11 +139,17 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   if (raw != Reason::kOk) return invalid(raw);
 
   ShiftsPm shift;
-  const bool ready = d.tracker_.Update(wl, shift, config_.freeze_on_gate && d.gate_);
+  using Gate = BaselineTracker::Gate;
+  const Gate gate = !config_.freeze_on_gate ? Gate::kNone : (d.gate_ ? Gate::kOpen : Gate::kClosed);
+  if (d.tracker_.state() == BaselineTracker::State::kCapturing) {
+    d.tracker_.Update(wl, shift, gate);
+    return invalid(Reason::kCapturing);
+  }
+  d.tracker_.Measure(wl, shift);
   out.common_mode_pm = d.tracker_.common_mode_pm();
-  if (!ready) return invalid(Reason::kCapturing);
-  if (d.tracker_.stale()) return invalid(Reason::kBaselineStale);
+  // Out of range: refused before it can move the baseline.
   if (!InRange(shift)) return invalid(Reason::kOutOfRange);
+  d.tracker_.Advance(wl, shift, gate);
 
   if (!d.primed_) {
     decoder_.Reset(d.net_, &shift);  // as if this frame had been there for the whole window
@@ -151,6 +158,12 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   const DecodeOutput o = decoder_.Decode(shift, d.net_);
   out.missing = o.missing;
   if (!o.valid) return invalid(Reason::kNonFinite);
+  // A baseline frozen too long is reported (a fault upstream), yet the stream goes on being decoded: the
+  // gate keeps driving the baseline, so the fault clears itself once the gate lets go.
+  if (d.tracker_.stale()) {
+    d.gate_ = o.in_contact;
+    return invalid(Reason::kBaselineStale);
+  }
   d.invalid_run_ = 0;
   out.valid = true;
   out.reason = Reason::kOk;

@@ -1,5 +1,7 @@
 #include "ruffini/eval/calibrate.h"
 
+#include <Eigen/Dense>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -193,6 +195,63 @@ v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::Patch
   u.set_position_within_2sd(static_cast<float>(s.position_within_2sd));
   (void)kChi2Sigma2;
   return u;
+}
+
+v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
+  v1::DecoderModel m = model;
+  m.clear_creep();
+  m.clear_input_range();
+  const decode::Pipeline<float> pipe(m, spec, OpenConfig(m, d));
+  const StreamPredictions p = DecodeStream(pipe, d);
+  const std::array<double, 3> tau = {1.0, 10.0, 100.0};
+  const double dt = 1.0 / d.info.sample_rate_hz;
+  std::array<double, 3> a{}, x{};
+  for (std::size_t k = 0; k < 3; ++k) a[k] = 1.0 - std::exp(-dt / tau[k]);
+  Eigen::Matrix3d ata = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d atb = Eigen::Vector3d::Zero();
+  std::size_t used = 0, pressed = 0;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double ref = Reference(d, k);
+    const double f = std::isfinite(ref) ? std::max(0.0, ref) : 0.0;
+    for (std::size_t j = 0; j < 3; ++j) x[j] += a[j] * (f - x[j]);  // the twin's discretisation
+    if (!p.valid[k] || !std::isfinite(ref)) continue;
+    // F_strain = F (1 + sum g a) + sum g (1 - a) x_prev: regress on the post-update x (same span).
+    const Eigen::Vector3d row(x[0], x[1], x[2]);
+    ata += row * row.transpose();
+    atb += row * (p.force_n[k] - ref);
+    ++used;
+    pressed += ref > 0.05;
+  }
+  if (pressed < 1000) throw InputError("creep fit: the data hold too few pressed frames (" + std::to_string(pressed) + "); use a field recording");
+  // Non-negative least squares over 3 terms: drop the most negative term until all are >= 0.
+  std::array<bool, 3> active = {true, true, true};
+  Eigen::Vector3d g = Eigen::Vector3d::Zero();
+  for (int round = 0; round < 3; ++round) {
+    Eigen::Matrix3d A = ata;
+    Eigen::Vector3d b = atb;
+    for (int j = 0; j < 3; ++j) {
+      if (active[static_cast<std::size_t>(j)]) continue;
+      A.row(j).setZero();
+      A.col(j).setZero();
+      A(j, j) = 1.0;
+      b[j] = 0.0;
+    }
+    g = A.ldlt().solve(b);
+    int worst = -1;
+    for (int j = 0; j < 3; ++j) {
+      if (active[static_cast<std::size_t>(j)] && g[j] < 0 && (worst < 0 || g[j] < g[worst])) worst = j;
+    }
+    if (worst < 0) break;
+    active[static_cast<std::size_t>(worst)] = false;
+  }
+  v1::CreepCompensation c;
+  for (std::size_t j = 0; j < 3; ++j) {
+    c.add_g(static_cast<float>(std::max(0.0, active[j] ? g[static_cast<Eigen::Index>(j)] : 0.0)));
+    c.add_tau_s(static_cast<float>(tau[j]));
+  }
+  c.set_source(d.info.source);
+  (void)used;
+  return c;
 }
 
 void ApplyGains(v1::DecoderModel& m, const std::vector<float>& g) {

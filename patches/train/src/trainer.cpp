@@ -1,5 +1,7 @@
 #include "ruffini/train/trainer.h"
 
+#include "ruffini/decode/baseline.h"
+
 #include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
 
@@ -142,7 +144,7 @@ class Trainer {
     }
     std::mt19937_64 rng(o_.seed * 7919 + 1);
     TrainLoop(*n.force, pools.frames, o_.epochs_force, o_.lr_force, phase + " force", rng, [&](const auto& batch) {
-      const auto out = n.force->forward(ForceInput(batch, n.force_norm));
+      const auto out = n.force->forward(ForceInput(batch, n.force_norm, &rng));
       const auto target = ForceTarget(batch, n);
       return o_.force_loss == "l1" ? torch::l1_loss(out, target) : torch::mse_loss(out, target);
     });
@@ -151,7 +153,7 @@ class Trainer {
     n.mlps = MlpBank(o_.mlp_widths, classes, o_.dropout, at::make_generator<at::CPUGeneratorImpl>(o_.seed + 101));
     TrainLoop(*n.mlps, pools.gated, o_.epochs_location, o_.lr_location, phase + " location (4 grids)", rng,
               [&](const auto& batch) {
-                const auto logp = torch::log_softmax(n.mlps->forward(LocInput(batch, n.loc_norm)), 2);
+                const auto logp = torch::log_softmax(n.mlps->forward(LocInput(batch, n.loc_norm, &rng)), 2);
                 // Cross-entropy per grid (mean over the batch), summed over the grids.
                 return -(LocTargets(batch, logp.size(2)) * logp).sum(2).mean(1).sum();
               });
@@ -287,15 +289,32 @@ class Trainer {
     }
   }
 
-  torch::Tensor ForceInput(const std::vector<std::uint32_t>& frames, const Norm& norm) const {
+  // Drift augmentation (training steps only, when drift_augment_pm > 0): one per-grating offset vector per
+  // sample, N(0, sigma) with its median removed (the shifts are common-mode free), added to every frame of
+  // the sample. It stands for what a frozen baseline accumulates in the field (the per-grating spread of a
+  // temperature drift, residual strain), so the nets cannot lean on directions the lab data never move in.
+  Frame16 DriftOffset(std::mt19937_64* rng) const {
+    Frame16 b{};
+    if (rng == nullptr || !(o_.drift_augment_pm > 0)) return b;
+    std::normal_distribution<float> normal(0.0f, static_cast<float>(o_.drift_augment_pm));
+    decode::ShiftsPm v;
+    for (auto& x : v) x = normal(*rng);
+    const float med = decode::MedianOfPresent(v, 1);
+    for (std::size_t i = 0; i < static_cast<std::size_t>(kG); ++i) b[i] = v[i] - med;
+    return b;
+  }
+  torch::Tensor ForceInput(const std::vector<std::uint32_t>& frames, const Norm& norm, std::mt19937_64* rng = nullptr) const {
     auto x = torch::empty({static_cast<long>(frames.size()), o_.window, kG});
     float* d = x.data_ptr<float>();
     for (std::size_t s = 0; s < frames.size(); ++s) {
       const std::size_t f = frames[s], a = start_of_[f];
+      const Frame16 b = DriftOffset(rng);
       for (int t = 0; t < o_.window; ++t) {
         const long back = o_.window - 1 - t;
         const std::size_t src = f >= a + static_cast<std::size_t>(back) ? f - static_cast<std::size_t>(back) : a;
-        for (int i = 0; i < kG; ++i) *d++ = Z(p_.shift_pm[src][static_cast<std::size_t>(i)], norm, i);
+        for (int i = 0; i < kG; ++i) {
+          *d++ = Z(p_.shift_pm[src][static_cast<std::size_t>(i)] + b[static_cast<std::size_t>(i)], norm, i);
+        }
       }
     }
     return x;
@@ -306,12 +325,14 @@ class Trainer {
     for (auto f : frames) *d++ = (p_.force_n[f] - n.f_mean) / n.f_std;
     return y;
   }
-  torch::Tensor LocInput(const std::vector<std::uint32_t>& frames, const Norm& norm) const {
+  torch::Tensor LocInput(const std::vector<std::uint32_t>& frames, const Norm& norm, std::mt19937_64* rng = nullptr) const {
     auto x = torch::empty({static_cast<long>(frames.size()), kG});
     float* d = x.data_ptr<float>();
+    const bool raw = o_.location_input != "unit";  // unit patterns are not augmented (the offset would be rescaled)
     for (auto f : frames) {
       const Frame16 v = LocRaw(f);
-      for (int i = 0; i < kG; ++i) *d++ = Z(v[static_cast<std::size_t>(i)], norm, i);
+      const Frame16 b = raw ? DriftOffset(rng) : Frame16{};
+      for (int i = 0; i < kG; ++i) *d++ = Z(v[static_cast<std::size_t>(i)] + b[static_cast<std::size_t>(i)], norm, i);
     }
     return x;
   }
@@ -366,6 +387,7 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
     throw InputError("train: location input must be raw or unit, not '" + o.location_input + "'");
   }
   if (!(o.label_sigma_mm >= 0 && o.label_sigma_mm <= 100)) throw InputError("train: label sigma must be 0..100 mm");
+  if (!(o.drift_augment_pm >= 0 && o.drift_augment_pm <= 100)) throw InputError("train: drift augmentation must be 0..100 pm");
   if (!(o.unit_floor_pm > 0)) throw InputError("train: unit floor must be > 0 pm");
   if (o.mlp_widths.size() != 3) throw InputError("train: the location MLPs have exactly 3 hidden layers");
   if (data.ids.size() < 10) throw InputError("train: the dataset has " + std::to_string(data.ids.size()) + " indentations; need at least 10");
@@ -457,6 +479,7 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
   info->set_force_loss(o.force_loss);
   info->set_lr_schedule(o.lr_schedule);
   info->set_location_label_sigma_mm(static_cast<float>(o.label_sigma_mm));
+  info->set_drift_augment_pm(static_cast<float>(o.drift_augment_pm));
   info->set_tool_version("ruffini 0.1.0, libtorch " TORCH_VERSION);
   info->set_seconds(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   return m;

@@ -12,10 +12,18 @@
 //   spread (a few % of it), which the slow filter below follows between touches.
 // - Slow filter. While untouched the baseline follows each grating with a first-order filter of time
 //   constant drift_tau_s.
-// - Freeze. The slow filter stops while any common-mode-free |shift| exceeds touch_on_pm OR the caller
-//   says a touch is on (`hold`: the decoder's own force gate). Both must stay quiet (every |shift| below
-//   touch_off_pm, no hold) for release_frames frames before it resumes. So a long light press that moves no
-//   grating by touch_on_pm is not eaten as long as the decoder sees it.
+// - Freeze, two modes.
+//   Shift-driven (no decoder at hand: preparing training data). The slow filter stops while any
+//   common-mode-free |shift| exceeds touch_on_pm; every |shift| must stay below touch_off_pm for
+//   release_frames frames before it resumes.
+//   Gate-driven (the decoding pipeline: the caller passes its force gate). The filter stops exactly while
+//   the decoder says a touch is on, and resumes release_frames after the gate closes, whatever the shifts
+//   are. The shifts alone cannot tell a light press from the drift that builds up under a long one, or from
+//   the viscoelastic residual a release leaves: thresholds on them latch the baseline frozen in the field
+//   (measured: docs/decoder-report). The decoder's gate can: a press it sees is never eaten (a long light
+//   press between gratings that moves no grating by touch_on_pm included), and what it does not call a
+//   touch is followed. The few frames between a touch's onset and the gate opening cost the touch
+//   W / (drift_tau_s x rate) of its size (0.5 % at W = 16).
 // - Staleness. Frozen longer than max_frozen_s is reported (stale()); the baseline is NOT released, since
 //   releasing it under a real press would eat the press: the pipeline turns a stale baseline into an
 //   invalid frame (a fault upstream), never into a quiet one.
@@ -50,10 +58,16 @@ class BaselineTracker {
 
   enum class State : std::uint8_t { kCapturing, kTracking, kFrozen };
 
+  enum class Gate : std::uint8_t { kNone, kClosed, kOpen };
   // Feeds one frame; writes shifts (pm, NaN where the peak is missing or no baseline yet), common mode
-  // removed when configured. `hold` keeps the slow filter frozen (the decoder's gate). Returns true when
-  // the shifts are usable (a baseline exists).
-  bool Update(const Wavelengths& wavelength_nm, ShiftsPm& shift_pm, bool hold = false) noexcept;
+  // removed when configured. gate = kNone: shift-driven freeze; kOpen / kClosed: the decoder's force gate
+  // (on the previous frame) drives it. Returns true when the shifts are usable (a baseline exists).
+  bool Update(const Wavelengths& wavelength_nm, ShiftsPm& shift_pm, Gate gate = Gate::kNone) noexcept;
+  // Update() in two steps, so a caller can look at the shifts before the frame moves the baseline (the
+  // pipeline refuses out-of-range frames without letting them in): Measure() writes the shifts and the
+  // common mode (false while capturing: then call Update()); Advance() moves the baseline and the freeze.
+  bool Measure(const Wavelengths& wavelength_nm, ShiftsPm& shift_pm) noexcept;
+  void Advance(const Wavelengths& wavelength_nm, const ShiftsPm& shift_pm, Gate gate = Gate::kNone) noexcept;
 
   [[nodiscard]] State state() const noexcept { return state_; }
   [[nodiscard]] const Wavelengths& baseline_nm() const noexcept { return baseline_nm_; }

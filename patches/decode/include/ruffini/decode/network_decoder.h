@@ -33,6 +33,7 @@ struct DecoderOptions {
   // Which location nets to fuse (indices into the model's location nets); empty = all (the paper's union).
   std::vector<int> grids;
   int max_missing = 3;  // more missing peaks than this: the frame is invalid
+  double sample_rate_hz = 100.0;  // the stream's rate (the model's creep compensation is in seconds)
 };
 
 template <typename Scalar>
@@ -58,6 +59,7 @@ class NetworkDecoder {
     Vector flat;               // the window in time order, flattened
     std::vector<Vector> loc;   // activations per location layer (all nets, reused)
     std::vector<float> probabilities;
+    std::array<double, 4> creep_x{};  // creep compensation state (applied force, low-passed per term)
   };
 
   // Real-time safe: no allocation, no lock, no throw.
@@ -99,6 +101,10 @@ class NetworkDecoder {
   float gate_on_n_ = 0.05f, gate_off_n_ = 0.04f;
   double radius_mm_ = 37.4;
   int max_missing_ = 3;
+  // Creep compensation (model.creep): F = (F_strain - sum g_k (1 - a_k) x_k) / (1 + sum g_k a_k), then
+  // x_k += a_k (F - x_k), with a_k = 1 - exp(-dt / tau_k): the exact inverse of the twin's discretised filter.
+  int creep_terms_ = 0;
+  std::array<double, 4> creep_g_{}, creep_a_{};
 };
 
 extern template class NetworkDecoder<float>;

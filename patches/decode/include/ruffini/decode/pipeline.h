@@ -6,7 +6,7 @@
 //   peaks (nm) + source flags
 //     -> plausibility of the raw frame (saturation, no light, a peak outside its grating's band, too many
 //        peaks missing)
-//     -> baseline (common mode removed, frozen while the decoder's own gate is open; see baseline.h)
+//     -> baseline (common mode removed, frozen exactly while the decoder's own gate is open; see baseline.h)
 //     -> plausibility of the shifts (baseline stale, a shift outside the range the model was calibrated on)
 //     -> the paper's networks (force CNN over a window, gated grid MLPs + NIP)
 //     -> calibrated uncertainty (force sd, 2x2 position covariance on the surface)
@@ -45,7 +45,7 @@ struct PipelineConfig {
   int max_missing = 3;         // missing peaks tolerated (each replaced by its training mean)
   double band_margin_nm = 0.1; // a peak may sit this far beyond its band (cast tolerance) before it is out of band
   double z_limit = 40.0;       // models without an InputRange: |z| of any shift above this is out of range
-  bool freeze_on_gate = true;  // the decoder's open gate freezes the baseline (false: only the shifts do, as before v1.1)
+  bool freeze_on_gate = true;  // the decoder's gate drives the baseline's freeze (false: the shifts do, as before v1.1)
 };
 
 struct PipelineOutput {

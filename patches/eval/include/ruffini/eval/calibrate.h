@@ -38,6 +38,11 @@ using GainProgress = std::function<void(int sweep, int sweeps, double objective)
 // subsample of the data's indentation frames. The returned gains are not yet applied.
 GainFit FitGains(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data,
                  int sweeps = 3, const GainProgress& progress = {});
+// Creep compensation: decodes press-hold-release data without compensation and fits the Prony gains g_k
+// (tau_s fixed: 1, 10, 100 s) by non-negative least squares of (decoded - applied force) on the applied
+// force low-passed with each tau. Throws InputError when the data hold no presses.
+v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data);
+
 // Folds per-grating gains into every network's input normalisation: z = (g s - mean) / std.
 void ApplyGains(v1::DecoderModel& model, const std::vector<float>& gain);
 

@@ -35,6 +35,7 @@ struct TrainOptions {
   std::string location_input = "raw";      // raw (the paper's) | unit (shifts / their norm)
   double unit_floor_pm = 1.0;              // unit: smallest norm divided by
   double label_sigma_mm = 0.0;             // 0: one-hot cell labels (the paper's); > 0: Gaussian soft labels
+  double drift_augment_pm = 0.0;           // > 0: per-sample per-grating offsets of this sigma in training (field drift)
   int folds = 5;                           // 0: no cross-validation
   double test_fraction = 0.15;
   double gate_n = 0.05;
