@@ -124,9 +124,7 @@ ModelAndData LoadModelAndData(const std::string& model_path, const std::string& 
 }
 
 eval::StreamPredictions DecodeWithProgress(const v1::DecoderModel& m, const patch::PatchSpec& spec, const dataset::Dataset& d,
-                                           const std::string& label, bool freeze_on_gate = true) {
-  decode::PipelineConfig cfg;
-  cfg.freeze_on_gate = freeze_on_gate;
+                                           const std::string& label, decode::PipelineConfig cfg = {}) {
   cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
   const decode::Pipeline<float> pipe(m, spec, cfg);
   std::unique_ptr<ProgressBar> bar;
@@ -150,6 +148,7 @@ void RegisterEvaluate(CLI::App& app) {
     std::vector<std::string> also;
     bool inversion = true;
     bool gate_freeze = true;
+    double confirm_s = decode::PipelineConfig{}.contact_confirm_s;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("evaluate", "Evaluate a model: decode as one stream, score honestly and as the paper did; write a report folder");
@@ -160,6 +159,8 @@ void RegisterEvaluate(CLI::App& app) {
   cmd->add_option("--report", a->report, "Report folder (report.md, pictures, predictions.h5)")->required();
   cmd->add_option("--also", a->also, "More datasets scored as rows of the field table: LABEL=FILE.h5 (other casts, field protocol)");
   cmd->add_flag("--inversion,!--no-inversion", a->inversion, "Also score the inversion decoder (training data only)")->capture_default_str();
+  cmd->add_option("--contact-confirm-s", a->confirm_s, "Report a contact once the force gate has been open this long")
+      ->check(CLI::Range(0.0, 1.0))->capture_default_str();
   cmd->add_flag("--gate-freeze,!--no-gate-freeze", a->gate_freeze,
                   "The decoder's gate freezes the baseline (--no-gate-freeze: only large shifts do, the old tracker)")
       ->capture_default_str();
@@ -177,7 +178,10 @@ void RegisterEvaluate(CLI::App& app) {
     } else {
       test = p.ids;  // unseen data: every indentation is test data
     }
-    const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", a->gate_freeze);
+    decode::PipelineConfig pcfg;
+    pcfg.freeze_on_gate = a->gate_freeze;
+    pcfg.contact_confirm_s = a->confirm_s;
+    const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", pcfg);
     const auto mask = eval::MaskOfIndentations(d, test);
     eval::Predictions pred;
     pred.force_n.resize(d.size());
@@ -210,7 +214,7 @@ void RegisterEvaluate(CLI::App& app) {
       const std::string label = item.substr(0, eq), path = item.substr(eq + 1);
       const dataset::Dataset other = dataset::ReadDataset(path);
       if (other.info.patch_name != m.patch_name()) throw InputError(path + ": dataset is from patch '" + other.info.patch_name + "'");
-      const auto osp = DecodeWithProgress(m, spec, other, "decoding " + label, a->gate_freeze);
+      const auto osp = DecodeWithProgress(m, spec, other, "decoding " + label, pcfg);
       std::vector<std::int32_t> ids;
       for (std::size_t k = 0; k < other.size(); ++k) {
         if (other.indentation[k] >= 0 && (ids.empty() || ids.back() != other.indentation[k])) ids.push_back(other.indentation[k]);
@@ -270,11 +274,12 @@ void RegisterEvaluate(CLI::App& app) {
     std::string command = "ruffini evaluate --model " + a->model + " --data " + a->data + " --report " + a->report;
     for (const auto& item : a->also) command += " --also " + item;
     if (!a->gate_freeze) command += " --no-gate-freeze";
+    if (a->confirm_s != decode::PipelineConfig{}.contact_confirm_s) command += " --contact-confirm-s " + std::to_string(a->confirm_s);
     eval::WriteReport(a->report, m, a->data, p, pred, ev, spec, command, extra, h.str());
     eval::WriteStreamPredictions(a->report + "/stream_predictions.h5", sp, a->model, a->data);
-    std::printf("honest: force %.1f mN all frames, %.1f mN above 50 mN; location above 50 mN %.2f mm (misses as failures), "
+    std::printf("honest: force %.1f mN all frames (%.1f mN against the load cell), %.1f mN above 50 mN; location above 50 mN %.2f mm (misses as failures), "
                 "%.2f mm located only; miss rate above 100 mN %.2f %%; false contacts %.3f %%\n",
-                sm.force_all_mn.median, sm.force_above_mn.median, sm.location_above_mm.median, sm.location_located_mm.median,
+                sm.force_all_mn.median, sm.force_all_loadcell_mn.median, sm.force_above_mn.median, sm.location_above_mm.median, sm.location_located_mm.median,
                 100.0 * sm.miss_rate_above_100mn, 100.0 * sm.false_contact_rate);
     for (const auto& [label, om] : rows) {
       std::printf("%s: force %.1f mN all, %.1f mN above 50 mN; location %.2f mm; false contacts %.3f %%\n", label.c_str(),
@@ -330,6 +335,7 @@ void RegisterCalibrate(CLI::App& app) {
     std::string model, data, out, creep_data, patch_spec = RUFFINI_DEFAULT_PATCH;
     int indentations = 100;
     bool gains = true;
+    bool creep = true;
     int sweeps = 3;
   };
   auto a = std::make_shared<Args>();
@@ -343,9 +349,11 @@ void RegisterCalibrate(CLI::App& app) {
   cmd->add_option("--indentations", a->indentations, "Use the recording's first N indentations (0 = all)")
       ->check(CLI::Range(0, 1000000))->capture_default_str();
   cmd->add_flag("--gains,!--no-gains", a->gains, "Fit per-grating gains (cast adaptation)")->capture_default_str();
-  cmd->add_option("--creep-data", a->creep_data,
-                  "A press-hold-release recording of the cast (e.g. --protocol field) to fit the creep compensation")
+  cmd->add_option("--field-data", a->creep_data,
+                  "A press-hold-release recording of the cast while the temperature moves (e.g. --protocol field): fits the "
+                  "gratings' thermal ratios and the creep compensation")
       ->check(CLI::ExistingFile);
+  cmd->add_flag("--creep,!--no-creep", a->creep, "With --field-data: also fit the creep compensation")->capture_default_str();
   cmd->add_option("--sweeps", a->sweeps, "Coordinate sweeps of the gain fit")->check(CLI::Range(1, 20))->capture_default_str();
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
@@ -363,12 +371,31 @@ void RegisterCalibrate(CLI::App& app) {
       cc->clear_grating_gain();
       for (float v : g.gain) cc->add_grating_gain(v);
       std::printf("gains fitted: objective %.2f -> %.2f (%d evaluations)\n", g.before, g.after, g.evaluations);
+      if (a->creep_data.empty() && m.preprocessing().thermal_ratio_size() > 0) {
+        // Thermal ratios belong to a cast: another cast's would be wrong. Unit ratios until --field-data.
+        m.mutable_preprocessing()->clear_thermal_ratio();
+        spdlog::warn("thermal ratios cleared (another cast's); fit this cast's with --field-data");
+      }
     }
     if (!a->creep_data.empty()) {
       const dataset::Dataset creep = dataset::ReadDataset(a->creep_data);
       if (creep.info.patch_name != m.patch_name()) throw InputError(a->creep_data + ": dataset is from patch '" + creep.info.patch_name + "'");
+      const std::vector<float> ratio = eval::FitThermalRatio(m, md.spec, creep);
+      m.mutable_preprocessing()->clear_thermal_ratio();
+      std::string shown;
+      for (float v : ratio) {
+        m.mutable_preprocessing()->add_thermal_ratio(v);
+        char b[16];
+        std::snprintf(b, sizeof b, " %.3f", v);
+        shown += b;
+      }
+      std::printf("thermal ratios:%s\n", shown.c_str());
+      if (!a->creep) {
+        m.clear_creep();
+      } else {
       *m.mutable_creep() = eval::FitCreep(m, md.spec, creep);
       std::printf("creep compensation: g = %.4f / %.4f / %.4f at tau 1 / 10 / 100 s\n", m.creep().g(0), m.creep().g(1), m.creep().g(2));
+      }
     }
     *m.mutable_input_range() = eval::FitInputRange(m, md.spec, cal);
     *m.mutable_uncertainty() = eval::FitUncertainty(m, md.spec, cal);

@@ -104,7 +104,7 @@ bool BaselineTracker::Measure(const Wavelengths& wl, ShiftsPm& shift) noexcept {
     const float cm = MedianOfPresent(shift, config_.min_common_mode_gratings);
     if (std::isfinite(cm)) {
       common_mode_pm_ = cm;
-      for (float& v : shift) v -= cm;  // NaN stays NaN
+      for (std::size_t i = 0; i < kGratings; ++i) shift[i] -= config_.thermal_ratio[i] * cm;  // NaN stays NaN
     }
   }
   return true;
@@ -140,7 +140,7 @@ void BaselineTracker::Advance(const Wavelengths& wl, const ShiftsPm& shift, Gate
     if (common_mode_pm_ != 0.0f) {  // follow the uniform drift under the touch
       const double beta = std::min(1.0, 1.0 / (config_.common_mode_tau_s * config_.sample_rate_hz));
       for (std::size_t i = 0; i < kGratings; ++i) {
-        if (std::isfinite(baseline_nm_[i])) baseline_nm_[i] += beta * common_mode_pm_ * 1e-3;
+        if (std::isfinite(baseline_nm_[i])) baseline_nm_[i] += beta * config_.thermal_ratio[i] * common_mode_pm_ * 1e-3;
       }
     }
   }

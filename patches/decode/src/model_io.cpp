@@ -142,6 +142,17 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
       }
       if (!(std::isfinite(r.margin_pm()) && r.margin_pm() >= 0)) throw InputError("input_range margin_pm must be finite and >= 0");
     }
+    if (m.preprocessing().thermal_ratio_size() != 0) {
+      if (m.preprocessing().thermal_ratio_size() != 16) {
+        throw InputError("preprocessing thermal_ratio has " + std::to_string(m.preprocessing().thermal_ratio_size()) +
+                         " entries, expected 16 (or none)");
+      }
+      for (float r : m.preprocessing().thermal_ratio()) {
+        if (!(std::isfinite(r) && r > 0.5f && r < 2.0f)) {
+          throw InputError("preprocessing thermal_ratio " + std::to_string(r) + " outside 0.5..2");
+        }
+      }
+    }
     if (m.has_creep()) {
       const auto& c = m.creep();
       if (c.g_size() != c.tau_s_size() || c.g_size() > 4) {

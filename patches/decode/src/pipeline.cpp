@@ -29,6 +29,9 @@ BaselineConfig BaselineFor(const v1::DecoderModel& model, double sample_rate_hz)
   BaselineConfig c;
   c.sample_rate_hz = sample_rate_hz;
   c.common_mode = model.preprocessing().common_mode_removed();
+  if (model.preprocessing().thermal_ratio_size() == static_cast<int>(kGratings)) {
+    for (std::size_t i = 0; i < kGratings; ++i) c.thermal_ratio[i] = model.preprocessing().thermal_ratio(static_cast<int>(i));
+  }
   return c;
 }
 
@@ -70,6 +73,10 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
     position_floor_mm2_ = u.position_floor_mm2();
   }
   mm_per_deg_ = m.surface_radius_mm() * std::numbers::pi / 180.0;
+  if (!(config_.contact_confirm_s >= 0 && config_.contact_confirm_s <= 1.0)) {
+    throw InputError("pipeline: contact_confirm_s must be 0..1 s");
+  }
+  confirm_frames_ = static_cast<int>(std::lround(config_.contact_confirm_s * config_.baseline.sample_rate_hz));
 }
 
 template <typename Scalar>
@@ -162,20 +169,25 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   // gate keeps driving the baseline, so the fault clears itself once the gate lets go.
   if (d.tracker_.stale()) {
     d.gate_ = o.in_contact;
+    d.open_run_ = 0;
+    d.contact_ = false;
     return invalid(Reason::kBaselineStale);
   }
   d.invalid_run_ = 0;
   out.valid = true;
   out.reason = Reason::kOk;
   out.force_n = o.force_n;
-  out.in_contact = o.in_contact;
-  if (o.in_contact && !d.gate_) ++d.counters_.onsets;
   d.gate_ = o.in_contact;
+  d.open_run_ = o.in_contact ? d.open_run_ + 1 : 0;
+  const bool contact = o.in_contact && d.open_run_ > confirm_frames_;
+  if (contact && !d.contact_) ++d.counters_.onsets;
+  d.contact_ = contact;
+  out.in_contact = contact;
   ++d.counters_.valid;
   const bool cal = !force_knots_.empty();
   out.force_sd_n = cal ? Interp(force_sd_, o.force_n) : kNaN;
-  out.located = o.located;
-  if (!o.located) {
+  out.located = o.located && contact;
+  if (!out.located) {
     out.y_mm = out.r_deg = kNaN;
     out.cov_yy_mm2 = out.cov_yr_mm2 = out.cov_rr_mm2 = kNaN;
     return out;

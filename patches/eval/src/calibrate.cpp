@@ -197,6 +197,47 @@ v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::Patch
   return u;
 }
 
+std::vector<float> FitThermalRatio(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
+  (void)spec;
+  if (!model.preprocessing().common_mode_removed()) throw InputError("thermal ratio: the model does not remove the common mode");
+  // No decoder involved (it would need the ratios to decode well): each grating's peak against the first
+  // second's mean, over the median grating's, once a second where the median has moved by 5 pm or more.
+  // A touch moves a few gratings now and then; the median of the per-second ratios ignores it.
+  if (d.size() < 2) throw InputError("thermal ratio: empty recording");
+  const auto every = static_cast<std::size_t>(std::max(1.0, d.info.sample_rate_hz));
+  decode::Wavelengths ref{};
+  std::array<int, 16> n{};
+  for (std::size_t k = 0; k < std::min(d.size(), every); ++k) {
+    for (std::size_t i = 0; i < 16; ++i) {
+      if (std::isfinite(d.wavelength_nm[k][i])) {
+        ref[i] += d.wavelength_nm[k][i];
+        ++n[i];
+      }
+    }
+  }
+  for (std::size_t i = 0; i < 16; ++i) ref[i] = n[i] ? ref[i] / n[i] : std::numeric_limits<double>::quiet_NaN();
+  std::array<std::vector<double>, 16> ratios;
+  for (std::size_t k = every; k < d.size(); k += every) {
+    decode::ShiftsPm s;
+    for (std::size_t i = 0; i < 16; ++i) s[i] = static_cast<float>((d.wavelength_nm[k][i] - ref[i]) * 1e3);
+    const double med = decode::MedianOfPresent(s, 9);
+    if (!(std::abs(med) >= 5.0)) continue;
+    for (std::size_t i = 0; i < 16; ++i) {
+      if (std::isfinite(s[i])) ratios[i].push_back(s[i] / med);
+    }
+  }
+  if (ratios[0].size() < 60) {
+    throw InputError("thermal ratio: the common drift moved 5 pm or more in only " + std::to_string(ratios[0].size()) +
+                     " seconds of the data (need 60); record while the temperature moves by a degree or so");
+  }
+  decode::ShiftsPm r;
+  for (std::size_t i = 0; i < 16; ++i) r[i] = ratios[i].empty() ? 1.0f : static_cast<float>(stats::Median(ratios[i]));
+  const float med = decode::MedianOfPresent(r, 1);
+  std::vector<float> out(16);
+  for (std::size_t i = 0; i < 16; ++i) out[i] = std::clamp(r[i] / med, 0.6f, 1.6f);
+  return out;
+}
+
 v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
   v1::DecoderModel m = model;
   m.clear_creep();

@@ -219,15 +219,16 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
 }
 
 std::string StreamMetricsHeader() {
-  return "| data | frames | force, all frames: median (IQR) mN | force > 50 mN | location > 50 mN, misses as failures: "
+  return "| data | frames | force, all frames: median (IQR) mN | same, against the load cell | force > 50 mN | location > 50 mN, misses as failures: "
          "median (IQR) mm | located only | missed > 50 mN | missed > 100 mN | false contacts (< 20 mN) | invalid |\n"
-         "|---|---|---|---|---|---|---|---|---|---|\n";
+         "|---|---|---|---|---|---|---|---|---|---|---|\n";
 }
 
 std::string StreamMetricsRow(const std::string& name, const StreamMetrics& m) {
   std::ostringstream o;
   const auto s = [](const stats::Summary& v, const char* fmt) { return F(fmt, v.median) + " (" + F(fmt, v.iqr()) + ")"; };
-  o << "| " << name << " | " << m.frames << " | " << s(m.force_all_mn, "%.1f") << " | " << s(m.force_above_mn, "%.1f") << " | "
+  o << "| " << name << " | " << m.frames << " | " << s(m.force_all_mn, "%.1f") << " | " << s(m.force_all_loadcell_mn, "%.1f") << " | "
+    << s(m.force_above_mn, "%.1f") << " | "
     << s(m.location_above_mm, "%.2f") << " | " << s(m.location_located_mm, "%.2f") << " | "
     << F("%.1f %%", 100.0 * static_cast<double>(m.above_missed) / std::max<double>(1.0, static_cast<double>(m.above_frames)))
     << " | " << F("%.2f %%", 100.0 * m.miss_rate_above_100mn) << " | "

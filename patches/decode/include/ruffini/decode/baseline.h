@@ -50,6 +50,15 @@ struct BaselineConfig {
   int min_common_mode_gratings = 9;  // fewer present gratings: no common-mode estimate (shifts left raw)
   double common_mode_tau_s = 1.0;    // while frozen, the baseline follows the common mode with this filter
   double max_frozen_s = 300.0;   // frozen longer than this: stale()
+  // Per-grating thermal sensitivity relative to the median grating: the common mode c comes off grating i
+  // as thermal_ratio[i] x c (all 1: uniform). A cast property (model Preprocessing.thermal_ratio).
+  std::array<float, kGratings> thermal_ratio = UnitRatios();
+
+  static constexpr std::array<float, kGratings> UnitRatios() {
+    std::array<float, kGratings> r{};
+    for (auto& v : r) v = 1.0f;
+    return r;
+  }
 };
 
 class BaselineTracker {

@@ -45,6 +45,9 @@ struct PipelineConfig {
   int max_missing = 3;         // missing peaks tolerated (each replaced by its training mean)
   double band_margin_nm = 0.1; // a peak may sit this far beyond its band (cast tolerance) before it is out of band
   double z_limit = 40.0;       // models without an InputRange: |z| of any shift above this is out of range
+  // A contact is reported once the force gate has stayed open this long (0: at once). Filters the single
+  // noisy frames that cross the gate at rest, at the price of this much onset latency.
+  double contact_confirm_s = 0.0;
   bool freeze_on_gate = true;  // the decoder's gate drives the baseline's freeze (false: the shifts do, as before v1.1)
 };
 
@@ -90,7 +93,9 @@ class Pipeline {
     PipelineCounters counters_;
     bool primed_ = false;   // the networks' window holds valid frames
     int invalid_run_ = 0;   // consecutive invalid frames since the last valid one
-    bool gate_ = false;
+    int open_run_ = 0;      // consecutive valid frames with the force gate open
+    bool gate_ = false;     // the decoder's force gate (drives the baseline)
+    bool contact_ = false;  // the reported contact (the gate, confirmed)
   };
 
   // One interrogator frame. Real-time safe: no allocation, no lock, no throw.
@@ -117,6 +122,7 @@ class Pipeline {
   std::vector<float> force_knots_, force_sd_, position_scale_;
   float position_floor_mm2_ = 0.0f;
   double mm_per_deg_ = 0.0;
+  int confirm_frames_ = 0;
 };
 
 extern template class Pipeline<float>;

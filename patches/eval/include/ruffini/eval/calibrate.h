@@ -43,6 +43,11 @@ GainFit FitGains(const v1::DecoderModel& model, const patch::PatchSpec& spec, co
 // force low-passed with each tau. Throws InputError when the data hold no presses.
 v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data);
 
+// Per-grating thermal sensitivity relative to the median grating, from a recording whose temperature moves:
+// the baseline tracker's per-grating drift while untouched, regressed on its median drift. Normalised to a
+// median of 1. Throws InputError when the temperature hardly moved (common drift RMS under 3 pm).
+std::vector<float> FitThermalRatio(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data);
+
 // Folds per-grating gains into every network's input normalisation: z = (g s - mean) / std.
 void ApplyGains(v1::DecoderModel& model, const std::vector<float>& gain);
 
