@@ -29,7 +29,7 @@ TEST(TwinRobustness, NonFiniteOrOversizedProbeRadiusIsRejected) {
     Shifts s;
     std::uint32_t flags = 0;
     t.StrainShiftsPm(std::span<const Contact>(&c, 1), s, flags);
-    EXPECT_TRUE(flags & kBadContact);
+    EXPECT_TRUE(flags & kFlagBadContact);
     for (double v : s) EXPECT_EQ(v, 0.0);
   }
 }
@@ -43,7 +43,7 @@ TEST(TwinRobustness, HugeForcesNeverGiveNaNWavelengths) {
     Shifts s;
     std::uint32_t flags = 0;
     t.StrainShiftsPm(cs, s, flags);
-    EXPECT_TRUE(flags & kSaturated) << f;
+    EXPECT_TRUE(flags & kFlagSaturated) << f;
     std::array<double, 16> wl{};
     sim.Read(0.0, s, wl, flags);
     for (std::size_t i = 0; i < 16; ++i) {
@@ -57,7 +57,7 @@ TEST(TwinRobustness, HugeForcesNeverGiveNaNWavelengths) {
   std::array<double, 16> wl{};
   std::uint32_t flags = 0;
   sim.Read(0.0, bad, wl, flags);
-  EXPECT_TRUE(flags & kPeakMissing);
+  EXPECT_TRUE(flags & kFlagPeakMissing);
   EXPECT_TRUE(std::isnan(wl[3]));
   EXPECT_TRUE(std::isfinite(wl[4]));
 }

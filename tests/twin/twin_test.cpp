@@ -132,10 +132,10 @@ TEST(TwinExtremes, TenNewtonOverloadSaturatesInTheBand) {
     std::uint32_t flags = 0;
     const Shifts s = Shift(twin, {Sphere(c.y_mm, c.r_deg, 10.0)}, flags);
     EXPECT_TRUE(AllFinite(s)) << "grating " << g + 1;
-    EXPECT_TRUE(flags & kSaturated) << "grating " << g + 1;
+    EXPECT_TRUE(flags & kFlagSaturated) << "grating " << g + 1;
     std::uint32_t at_limit_flags = 0;
     const Shifts at_limit = Shift(twin, {Sphere(c.y_mm, c.r_deg, limit_n)}, at_limit_flags);
-    EXPECT_FALSE(at_limit_flags & kSaturated);
+    EXPECT_FALSE(at_limit_flags & kFlagSaturated);
     for (std::size_t i = 0; i < kN; ++i) EXPECT_DOUBLE_EQ(s[i], at_limit[i]) << "saturated response, grating " << i + 1;
     std::array<double, kN> wl{};
     sim.Read(0.0, s, wl, flags);
@@ -180,7 +180,7 @@ TEST(TwinExtremes, OverloadBeyondTheBandIsClippedAndFlagged) {
     std::array<double, kN> wl{};
     std::uint32_t flags = 0;
     sim.Read(0.0, s, wl, flags);
-    EXPECT_TRUE(flags & kSaturated) << pm;
+    EXPECT_TRUE(flags & kFlagSaturated) << pm;
     for (std::size_t i = 0; i < kN; ++i) EXPECT_DOUBLE_EQ(wl[i], ref[i] + std::copysign(band_nm, pm)) << pm;
   }
   // 40 N: far beyond the linear range; saturated and flagged, still in the band.
@@ -189,7 +189,7 @@ TEST(TwinExtremes, OverloadBeyondTheBandIsClippedAndFlagged) {
     std::uint32_t flags = 0;
     const Shifts s = Shift(twin, {Sphere(c.y_mm, c.r_deg, 40.0)}, flags);
     EXPECT_TRUE(AllFinite(s));
-    EXPECT_TRUE(flags & kSaturated) << "40 N on grating " << g + 1;
+    EXPECT_TRUE(flags & kFlagSaturated) << "40 N on grating " << g + 1;
     std::array<double, kN> wl{};
     flags = 0;
     sim.Read(0.0, s, wl, flags);
@@ -225,7 +225,7 @@ TEST(TwinExtremes, ContactOnTheExtentBoundaryCounts) {
     std::uint32_t flags = 0;
     const Shifts s = Shift(twin, {c}, flags);
     EXPECT_TRUE(AllFinite(s)) << c.at.y_mm << ", " << c.at.r_deg;
-    EXPECT_EQ(flags & kOffPatch, 0u) << c.at.y_mm << ", " << c.at.r_deg;
+    EXPECT_EQ(flags & kFlagOffPatch, 0u) << c.at.y_mm << ", " << c.at.r_deg;
     EXPECT_EQ(flags, 0u);
   }
   // Near a grating the edge contact really responds (Y = 24 row: R = 0 is 42.5 deg = 28 mm from FBG 1).
@@ -243,11 +243,11 @@ TEST(TwinExtremes, ContactOutsideThePatchContributesNothing) {
   for (const Contact& out : {Sphere(-1, 72.5, 1.0), Sphere(151, 72.5, 1.0), Sphere(66, 146, 1.0), Sphere(66, -5, 1.0),
                              Sphere(-1, 72.5, 10.0)}) {
     const Shifts s = Shift(twin, {out}, flags);
-    EXPECT_TRUE(flags & kOffPatch) << out.at.y_mm << ", " << out.at.r_deg;
-    EXPECT_EQ(flags & kBadContact, 0u);
+    EXPECT_TRUE(flags & kFlagOffPatch) << out.at.y_mm << ", " << out.at.r_deg;
+    EXPECT_EQ(flags & kFlagBadContact, 0u);
     for (double v : s) EXPECT_EQ(v, 0.0);
     const Shifts both = Shift(twin, {inside, out}, flags);
-    EXPECT_TRUE(flags & kOffPatch);
+    EXPECT_TRUE(flags & kFlagOffPatch);
     for (std::size_t i = 0; i < kN; ++i) EXPECT_EQ(both[i], alone[i]);
   }
 }
@@ -263,10 +263,10 @@ TEST(TwinExtremes, BadContactsContributeNothingAndAreFlagged) {
                               Contact{{66, 72.5}, 1.0, Probe{Probe::Shape::kSphere, 3.0}}};  // not built for 3 mm
   for (const Contact& b : bad) {
     const Shifts s = Shift(twin, {b}, flags);
-    EXPECT_TRUE(flags & kBadContact) << "force " << b.force_n << ", radius " << b.probe.radius_mm;
+    EXPECT_TRUE(flags & kFlagBadContact) << "force " << b.force_n << ", radius " << b.probe.radius_mm;
     for (double v : s) EXPECT_EQ(v, 0.0);
     const Shifts both = Shift(twin, {b, inside}, flags);
-    EXPECT_TRUE(flags & kBadContact);
+    EXPECT_TRUE(flags & kFlagBadContact);
     for (std::size_t i = 0; i < kN; ++i) EXPECT_EQ(both[i], alone[i]);
   }
   EXPECT_EQ(twin.contact_law(Probe{Probe::Shape::kSphere, 3.0}), nullptr);
@@ -365,7 +365,7 @@ TEST(TwinExtremes, DeadGratingIsAlwaysMissing) {
     std::array<double, kN> wl{};
     std::uint32_t flags = 0;
     sim.Read(k * 0.01, k % 2 ? touch : Shifts{}, wl, flags);
-    EXPECT_TRUE(flags & kPeakMissing);
+    EXPECT_TRUE(flags & kFlagPeakMissing);
     for (std::size_t i = 0; i < kN; ++i) {
       if (i == 4) {
         ASSERT_TRUE(std::isnan(wl[i])) << "frame " << k;
@@ -390,7 +390,7 @@ TEST(TwinExtremes, DimmedGratingDropsOutAboutHalfTheTimeAndIsNoisier) {
     std::array<double, kN> wl{};
     std::uint32_t flags = 0;
     sim.Read(k * 0.01, Shifts{}, wl, flags);
-    flagged += (flags & kPeakMissing) ? 1 : 0;
+    flagged += (flags & kFlagPeakMissing) ? 1 : 0;
     for (std::size_t i = 0; i < kN; ++i) {
       if (i == 8) continue;
       ASSERT_TRUE(std::isfinite(wl[i]));

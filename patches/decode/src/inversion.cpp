@@ -18,7 +18,7 @@ ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vect
   //    every grating's shift on (F, F^2) gives its sensitivity g = slope at small force and the curvature.
   struct Site {
     double y, r;
-    std::array<double, 16> g;
+    std::array<double, kGratings> g;
     double curvature;  // b / a of s = a F + b F^2 on the strongest grating
   };
   std::vector<Site> sites;
@@ -28,7 +28,7 @@ ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vect
     while (e < s.size() && y[e] == y[k] && r[e] == r[k]) ++e;
     if (std::isfinite(y[k]) && std::isfinite(r[k])) {
       double s11 = 0, s12 = 0, s22 = 0;
-      std::array<double, 16> t1{}, t2{};
+      std::array<double, kGratings> t1{}, t2{};
       int n = 0;
       for (std::size_t j = k; j < e; ++j) {
         const double f = force[j];
@@ -88,11 +88,11 @@ ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vect
   const double spacing = std::sqrt(area_mm2 / static_cast<double>(sites.size()));
   const double h = std::clamp(0.6 * spacing, 0.75, 6.0);
   const double cutoff2 = 9.0 * h * h;
-  m.g.assign(static_cast<std::size_t>(m.ny * m.nr), std::array<float, 16>{});
+  m.g.assign(static_cast<std::size_t>(m.ny * m.nr), std::array<float, kGratings>{});
   for (int iy = 0; iy < m.ny; ++iy) {
     for (int ir = 0; ir < m.nr; ++ir) {
       const double ny_mm = m.y0_mm + iy * m.dy_mm, nr_deg = m.r0_deg + ir * m.dr_deg;
-      std::array<double, 16> acc{};
+      std::array<double, kGratings> acc{};
       double wsum = 0, nearest = 1e300;
       std::size_t nearest_site = 0;
       for (std::size_t j = 0; j < sites.size(); ++j) {
@@ -116,8 +116,8 @@ ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vect
   return m;
 }
 
-void ResponseModel::Eval(double y, double r, std::array<double, 16>& out, std::array<double, 16>* gy,
-                         std::array<double, 16>* gr) const noexcept {
+void ResponseModel::Eval(double y, double r, std::array<double, kGratings>& out, std::array<double, kGratings>* gy,
+                         std::array<double, kGratings>* gr) const noexcept {
   const double fy = std::clamp((y - y0_mm) / dy_mm, 0.0, ny - 1.000001);
   const double fr = std::clamp((r - r0_deg) / dr_deg, 0.0, nr - 1.000001);
   const int iy = static_cast<int>(fy), ir = static_cast<int>(fr);
@@ -148,7 +148,7 @@ struct FitFunctor {
   [[nodiscard]] int inputs() const { return 3; }
   [[nodiscard]] int values() const { return n_used; }
   int operator()(const Eigen::VectorXd& x, Eigen::VectorXd& res) const {
-    std::array<double, 16> g{};
+    std::array<double, kGratings> g{};
     m->Eval(x[0], x[1], g);
     const double fe = x[2] * (1 + m->stiffening * x[2]);
     for (int k = 0; k < n_used; ++k) {
@@ -158,7 +158,7 @@ struct FitFunctor {
     return 0;
   }
   int df(const Eigen::VectorXd& x, Eigen::MatrixXd& j) const {
-    std::array<double, 16> g{}, gy{}, gr{};
+    std::array<double, kGratings> g{}, gy{}, gr{};
     m->Eval(x[0], x[1], g, &gy, &gr);
     const double fe = x[2] * (1 + m->stiffening * x[2]), dfe = 1 + 2 * m->stiffening * x[2];
     for (int k = 0; k < n_used; ++k) {

@@ -130,7 +130,7 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
     if (!(m.gating().on_n() >= m.gating().off_n())) throw InputError("gating on_n must be >= off_n");
     if (m.has_input_range()) {
       const auto& r = m.input_range();
-      if (r.min_shift_pm_size() != 16 || r.max_shift_pm_size() != 16) {
+      if (static_cast<std::size_t>(r.min_shift_pm_size()) != kGratings || static_cast<std::size_t>(r.max_shift_pm_size()) != kGratings) {
         throw InputError("input_range has " + std::to_string(r.min_shift_pm_size()) + " minima and " +
                          std::to_string(r.max_shift_pm_size()) + " maxima, expected 16 each");
       }
@@ -143,7 +143,7 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
       if (!(std::isfinite(r.margin_pm()) && r.margin_pm() >= 0)) throw InputError("input_range margin_pm must be finite and >= 0");
     }
     if (m.preprocessing().thermal_ratio_size() != 0) {
-      if (m.preprocessing().thermal_ratio_size() != 16) {
+      if (static_cast<std::size_t>(m.preprocessing().thermal_ratio_size()) != kGratings) {
         throw InputError("preprocessing thermal_ratio has " + std::to_string(m.preprocessing().thermal_ratio_size()) +
                          " entries, expected 16 (or none)");
       }

@@ -173,7 +173,7 @@ float NetworkDecoder<Scalar>::ForceOnWindow(const float* w, Data& d) const noexc
 }
 
 template <typename Scalar>
-void NetworkDecoder<Scalar>::RunLocation(const std::array<Scalar, 16>& raw, const std::array<bool, 16>& present,
+void NetworkDecoder<Scalar>::RunLocation(const std::array<Scalar, kGratings>& raw, const std::array<bool, kGratings>& present,
                                           Data& d) const noexcept {
   // The norm of the present gratings' shifts, for nets that see the unit pattern. Shifts are clamped to
   // +-1e6 pm first so the sum of squares stays finite in float.
@@ -219,8 +219,8 @@ template <typename Scalar>
 DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) const noexcept {
   DecodeOutput out;
   // Missing peaks (NaN/Inf) take the training mean: they carry no information, and z = 0 says so.
-  std::array<Scalar, 16> raw{};
-  std::array<bool, 16> present{};
+  std::array<Scalar, kGratings> raw{};
+  std::array<bool, kGratings> present{};
   int missing = 0;
   for (std::size_t i = 0; i < 16; ++i) {
     present[i] = std::isfinite(shift[i]);
@@ -282,8 +282,8 @@ DecodeOutput NetworkDecoder<Scalar>::Decode(const ShiftsPm& shift, Data& d) cons
 
 template <typename Scalar>
 void NetworkDecoder<Scalar>::Probabilities(const ShiftsPm& shift, Data& d, std::vector<float>& out) const {
-  std::array<Scalar, 16> raw{};
-  std::array<bool, 16> present{};
+  std::array<Scalar, kGratings> raw{};
+  std::array<bool, kGratings> present{};
   for (std::size_t i = 0; i < 16; ++i) {
     present[i] = std::isfinite(shift[i]);
     raw[i] = present[i] ? static_cast<Scalar>(shift[i]) : Scalar(0);

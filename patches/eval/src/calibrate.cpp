@@ -73,7 +73,7 @@ v1::InputRange FitInputRange(const v1::DecoderModel& m, const patch::PatchSpec& 
                              double margin_fraction, double margin_pm) {
   (void)spec;
   const Prepared p = PrepareFrames(d, decode::BaselineFor(m, d.info.sample_rate_hz));
-  std::array<float, 16> lo, hi;
+  std::array<float, kGratings> lo, hi;
   lo.fill(std::numeric_limits<float>::infinity());
   hi.fill(-std::numeric_limits<float>::infinity());
   for (const auto& s : p.shift_pm) {
@@ -296,7 +296,7 @@ v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::Patch
 }
 
 void ApplyGains(v1::DecoderModel& m, const std::vector<float>& g) {
-  if (g.size() != 16) throw InputError("gains: expected 16, got " + std::to_string(g.size()));
+  if (g.size() != kGratings) throw InputError("gains: expected 16, got " + std::to_string(g.size()));
   auto fold = [&](v1::Normalization* n) {
     for (int i = 0; i < 16; ++i) {
       const float gi = g[static_cast<std::size_t>(i)];

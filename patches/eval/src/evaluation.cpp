@@ -1,5 +1,7 @@
 #include "ruffini/eval/evaluation.h"
 
+#include "ruffini/paper.h"
+
 #include <hdf5.h>
 
 #include <algorithm>
@@ -300,18 +302,18 @@ void WriteReport(const std::string& dir, const v1::DecoderModel& m, const std::s
     << " frames, " << ev.location_frames << " above the 50 mN gate).\n\n";
   o << front;
   o << "## Test set, side by side with the paper\n\n| measure | paper | ours |\n|---|---|---|\n";
-  o << Row("force error, median (IQR)", "35 mN (56)", F("%.1f mN", ev.force_error_mn.median) + " (" + F("%.1f", ev.force_error_mn.iqr()) + ")");
-  o << Row("location error, median (IQR)", "3.2 mm (2.3)", F("%.2f mm", ev.location_error_mm.median) + " (" + F("%.2f", ev.location_error_mm.iqr()) + ")");
-  o << Row("random-guess force error (guess)", "194 mN (IQR 714), guess 176 mN",
+  o << Row("force error, median (IQR)", F("%.0f mN", paper::kForceErrorMn) + " (" + F("%.0f", paper::kForceIqrMn) + ")", F("%.1f mN", ev.force_error_mn.median) + " (" + F("%.1f", ev.force_error_mn.iqr()) + ")");
+  o << Row("location error, median (IQR)", F("%.1f mm", paper::kLocationErrorMm) + " (" + F("%.1f", paper::kLocationIqrMm) + ")", F("%.2f mm", ev.location_error_mm.median) + " (" + F("%.2f", ev.location_error_mm.iqr()) + ")");
+  o << Row("random-guess force error (guess)", F("%.0f mN", paper::kRgForceErrorN * 1e3) + " (IQR " + F("%.0f", paper::kRgForceIqrN * 1e3) + "), guess " + F("%.0f mN", paper::kMedianForceN * 1e3),
            F("%.0f mN", ev.rg_force_error_mn.median) + " (IQR " + F("%.0f", ev.rg_force_error_mn.iqr()) + "), guess " + F("%.0f mN", ev.rg_force_guess_n * 1e3));
-  o << Row("random-guess location error", "34.72 mm (IQR 24.68)",
+  o << Row("random-guess location error", F("%.2f mm", paper::kRgLocationMm) + " (IQR " + F("%.2f", paper::kRgLocationIqrMm) + ")",
            F("%.2f mm", ev.rg_location_error_mm.median) + " (IQR " + F("%.2f", ev.rg_location_error_mm.iqr()) + ")");
   auto pv = [](double pval) { return pval > 0 ? "p = " + F("%.3g", pval) : std::string("p < 1e-300"); };
   o << Row("Wilcoxon vs random guess, force", "p < 0.001", pv(ev.force_wilcoxon.p_two_sided) + " (n = " + std::to_string(ev.force_wilcoxon.n) + ")");
   o << Row("Wilcoxon vs random guess, location", "p < 0.001", pv(ev.location_wilcoxon.p_two_sided) + " (n = " + std::to_string(ev.location_wilcoxon.n) + ")");
-  o << Row("Cohen's d (paired) force / location", "0.84 / 1.90", F("%.2f", ev.force_cohens_d) + " / " + F("%.2f", ev.location_cohens_d));
+  o << Row("Cohen's d (paired) force / location", F("%.2f", paper::kCohensDForce) + " / " + F("%.2f", paper::kCohensDLocation), F("%.2f", ev.force_cohens_d) + " / " + F("%.2f", ev.location_cohens_d));
   o << Row("frames above the gate not located", "-", std::to_string(ev.location_missed) + " of " + std::to_string(ev.location_frames + ev.location_missed));
-  o << Row("force error vs force: R2 of a line (binned medians)", "0.97", F("%.2f", ev.force_error_r2));
+  o << Row("force error vs force: R2 of a line (binned medians)", F("%.2f", paper::kForceErrorVsForceR2), F("%.2f", ev.force_error_r2));
   o << Row("edges vs interior, force (mN)", "worse at the edges", F("%.1f", ev.edge_force_mn) + " vs " + F("%.1f", ev.interior_force_mn));
   o << Row("edges vs interior, location (mm)", "worse at the edges", F("%.2f", ev.edge_location_mm) + " vs " + F("%.2f", ev.interior_location_mm));
   o << "\nForce error is over every test frame (invalid frames count as 0 N). Location error is over test frames with a force label above 50 mN that the gate let through; frames the gate kept closed are counted above and left out. Random guesses use the medians of the training part, as the paper did. Cohen's d is paired: the mean difference of the absolute errors over their standard deviation.\n\n";

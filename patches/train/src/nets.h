@@ -6,6 +6,8 @@
 // what one fit produces (the nets and the normalisations they were trained with).
 #include <torch/torch.h>
 
+#include "ruffini/frame.h"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -14,7 +16,7 @@
 
 namespace ruffini::train::detail {
 
-constexpr int kG = 16;
+constexpr int kG = static_cast<int>(::ruffini::kGratings);
 
 struct ForceNetImpl : torch::nn::Module {
   explicit ForceNetImpl(int window) {

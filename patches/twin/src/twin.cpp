@@ -203,11 +203,11 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
   for (const Contact& c : contacts) {
     if (!std::isfinite(c.force_n) || c.force_n < 0.0 || !std::isfinite(c.at.y_mm) || !std::isfinite(c.at.r_deg) ||
         !(c.probe.radius_mm > 0.0 && c.probe.radius_mm <= kMaxProbeRadiusMm)) {
-      flags |= kBadContact;
+      flags |= kFlagBadContact;
       continue;
     }
     if (!extent.Contains(c.at)) {
-      flags |= kOffPatch;
+      flags |= kFlagOffPatch;
       continue;
     }
     if (c.force_n == 0.0) continue;
@@ -217,18 +217,18 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
     if (c.probe.shape == Probe::Shape::kSphere) {
       const ContactLaw* law = contact_law(c.probe);
       if (law == nullptr) {
-        flags |= kBadContact;
+        flags |= kFlagBadContact;
         continue;
       }
       if (force > law->linear_limit_force_n()) {
         force = law->linear_limit_force_n();
-        flags |= kSaturated;
+        flags |= kFlagSaturated;
       }
       depth = law->DepthMm(force);
       radius = std::min(c.probe.radius_mm, std::sqrt(c.probe.radius_mm * depth));
     } else if (force > point_force_limit_n_) {
       force = point_force_limit_n_;
-      flags |= kSaturated;
+      flags |= kFlagSaturated;
     }
     const double f = force * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
     const double cr = c.at.r_deg * patch::kDegToRad;
@@ -313,12 +313,12 @@ void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, 
     double shift = strain[i] + tc[i] * dt_c + noise_pm_[i] * n;
     if (dead_[i] || u < dropout_[i] || std::isnan(shift)) {
       wl[i] = std::numeric_limits<double>::quiet_NaN();
-      flags |= kPeakMissing;
+      flags |= kFlagPeakMissing;
       continue;
     }
     if (!(std::abs(shift) <= band_pm)) {  // the interrogator cannot follow a peak out of its band
       shift = std::clamp(shift, -band_pm, band_pm);
-      flags |= kSaturated;
+      flags |= kFlagSaturated;
     }
     wl[i] = ref[i] + shift * 1e-3;
   }

@@ -6,9 +6,11 @@
 #include <string>
 #include <vector>
 
+#include "ruffini/frame.h"
+
 namespace ruffini::patch {
 
-inline constexpr std::size_t kGratings = 16;
+using ::ruffini::kGratings;  // ruffini/frame.h
 
 // Silicone constants (Dragon Skin 10 in the paper).
 struct Material {

@@ -23,18 +23,15 @@
 #include <utility>
 #include <vector>
 
+#include "ruffini/frame.h"
+
 namespace ruffini::dataset {
 
-inline constexpr std::size_t kChannels = 16;
+inline constexpr std::size_t kChannels = ::ruffini::kGratings;  // ruffini/frame.h
 inline constexpr int kFormatVersion = 1;
 
-enum FrameFlags : std::uint32_t {
-  kFlagNone = 0,
-  kFlagSaturated = 1u << 0,     // some peak was clipped to its band (overload)
-  kFlagOffPatch = 1u << 1,      // a contact lay outside the patch and was ignored
-  kFlagPeakMissing = 1u << 2,   // some peak is NaN (dead or dimmed grating)
-  kFlagBadContact = 1u << 3,    // a contact had a non-finite or negative force and was ignored
-};
+using ::ruffini::FrameFlags;  // ruffini/frame.h
+using enum ::ruffini::FrameFlags;
 
 // One interrogator sample with its labels.
 struct Frame {

@@ -32,10 +32,12 @@
 #include <array>
 #include <cstdint>
 
+#include "ruffini/frame.h"
+
 namespace ruffini::decode {
 
-inline constexpr std::size_t kGratings = 16;
-using Wavelengths = std::array<double, kGratings>;
+using ::ruffini::kGratings;    // ruffini/frame.h
+using ::ruffini::Wavelengths;
 using ShiftsPm = std::array<float, kGratings>;
 
 struct BaselineConfig {

@@ -22,7 +22,7 @@ namespace ruffini::decode {
 struct ResponseModel {
   double y0_mm = 0, r0_deg = 0, dy_mm = 2, dr_deg = 2;
   int ny = 0, nr = 0;
-  std::vector<std::array<float, 16>> g;  // ny * nr nodes, pm per newton
+  std::vector<std::array<float, kGratings>> g;  // ny * nr nodes, pm per newton
   double stiffening = 0.0;               // c in F (1 + c F)
   double noise_pm = 0.3;                 // per-grating noise assumed by chi-square and covariance
   double surface_radius_mm = 37.4;
@@ -33,8 +33,8 @@ struct ResponseModel {
                            const std::vector<float>& y_mm, const std::vector<float>& r_deg,
                            const patch::Region& area, double surface_radius_mm, double min_force_n = 0.1);
   // g and its derivatives d/dY, d/dR at a point (clamped to the grid). No allocation.
-  void Eval(double y_mm, double r_deg, std::array<double, 16>& out, std::array<double, 16>* dg_dy = nullptr,
-            std::array<double, 16>* dg_dr = nullptr) const noexcept;
+  void Eval(double y_mm, double r_deg, std::array<double, kGratings>& out, std::array<double, kGratings>* dg_dy = nullptr,
+            std::array<double, kGratings>* dg_dr = nullptr) const noexcept;
 };
 
 struct InversionOptions {

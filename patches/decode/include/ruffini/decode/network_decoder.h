@@ -52,7 +52,7 @@ class NetworkDecoder {
 
    private:
     friend class NetworkDecoder;
-    Eigen::Matrix<Scalar, Eigen::Dynamic, 16, Eigen::RowMajor> window;  // ring, W x 16 (z-scored)
+    Eigen::Matrix<Scalar, Eigen::Dynamic, static_cast<int>(kGratings), Eigen::RowMajor> window;  // ring, W x 16 (z-scored)
     int head = 0, filled = 0;
     bool gate = false;
     std::vector<Vector> act;   // activations per force layer
@@ -84,16 +84,16 @@ class NetworkDecoder {
     int channels = 0, length = 0, pool = 1;  // output geometry before pooling (conv layers)
   };
   struct Mlp {
-    std::array<Scalar, 16> mean{}, inv_std{};
+    std::array<Scalar, kGratings> mean{}, inv_std{};
     std::vector<Layer> layers;
     bool unit = false;       // input divided by the shifts' norm (LocationNet.UNIT)
     Scalar unit_floor = 1;   // pm
   };
   void RunForce(Data& d) const noexcept;
-  void RunLocation(const std::array<Scalar, 16>& raw, const std::array<bool, 16>& present, Data& d) const noexcept;
+  void RunLocation(const std::array<Scalar, kGratings>& raw, const std::array<bool, kGratings>& present, Data& d) const noexcept;
 
   int window_ = 1;
-  std::array<Scalar, 16> f_mean_{}, f_inv_std_{};
+  std::array<Scalar, kGratings> f_mean_{}, f_inv_std_{};
   std::vector<Layer> force_;
   Scalar out_scale_ = 1, out_offset_ = 0;
   std::vector<Mlp> location_;

@@ -105,8 +105,8 @@ class Pipeline {
   [[nodiscard]] const PipelineConfig& config() const noexcept { return config_; }
   [[nodiscard]] bool calibrated_uncertainty() const noexcept { return !force_knots_.empty(); }
 
-  // Source flag bit meaning "saturated" (the dataset's kFlagSaturated / the twin's kSaturated).
-  static constexpr std::uint32_t kSourceSaturated = 1u << 0;
+  // Source flag bit meaning "saturated" (ruffini/frame.h).
+  static constexpr std::uint32_t kSourceSaturated = ::ruffini::kFlagSaturated;
 
  private:
   [[nodiscard]] Reason CheckRaw(const Wavelengths& wl, std::uint32_t flags) const noexcept;

@@ -89,12 +89,6 @@ struct Evaluation {
 
 Evaluation Evaluate(const Prepared& data, const Predictions& pred, const patch::PatchSpec& spec, double gate_n = 0.05);
 
-// The paper's numbers, for the side-by-side tables.
-struct PaperNumbers {
-  static constexpr double kForceMedianMn = 35, kForceIqrMn = 56, kLocationMedianMm = 3.2, kLocationIqrMm = 2.3;
-  static constexpr double kRgForceMn = 194, kRgForceIqrMn = 714, kRgLocationMm = 34.72, kRgLocationIqrMm = 24.68;
-  static constexpr double kCohensDForce = 0.84, kCohensDLocation = 1.90;
-};
 
 // Writes DIR/report.md, DIR/*.svg and DIR/predictions.h5. `front` is Markdown placed before the paper's tables,
 // `extra` Markdown appended (other decoders).

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "ruffini/paper.h"
 #include "ruffini/twin/protocols.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
@@ -123,15 +124,17 @@ double CalibrateStrainTransfer(const patch::PatchSpec& spec, const TwinEffects& 
                                double target_mm2, double step_mm = 0.25);
 
 // Targets (from the paper, FACTS.md) and tolerances the tests and the report use.
+// The paper's numbers come from ruffini/paper.h; the tolerances are ours.
 struct Targets {
-  static constexpr double kHotSpotMedianMm2 = 15.9, kHotSpotQ1Mm2 = 9.0, kHotSpotQ3Mm2 = 20.9;
+  static constexpr double kHotSpotMedianMm2 = paper::kHotSpotMedianMm2, kHotSpotQ1Mm2 = paper::kHotSpotQ1Mm2,
+                          kHotSpotQ3Mm2 = paper::kHotSpotQ3Mm2;
   static constexpr double kHotSpotTolerance = 0.30;
-  static constexpr double kDetection75N = 0.0506, kDetectionTolerance = 0.30;
+  static constexpr double kDetection75N = paper::kDetection75N, kDetectionTolerance = 0.30;
   static constexpr int kCrossTalk1nMin = 1;    // T3 at 1 N: at least one neighbour
   static constexpr int kCrossTalk2n5Min = 3;   // T3 at 2.5 N: "several"
-  static constexpr double kMedianForceN = 0.176;
-  static constexpr double kRgForceErrorN = 0.194, kRgForceIqrN = 0.714;
-  static constexpr double kRgLocationMm = 34.72, kRgLocationIqrMm = 24.68;
+  static constexpr double kMedianForceN = paper::kMedianForceN;
+  static constexpr double kRgForceErrorN = paper::kRgForceErrorN, kRgForceIqrN = paper::kRgForceIqrN;
+  static constexpr double kRgLocationMm = paper::kRgLocationMm, kRgLocationIqrMm = paper::kRgLocationIqrMm;
 };
 
 }  // namespace ruffini::twin

@@ -18,6 +18,7 @@
 #include <span>
 #include <vector>
 
+#include "ruffini/frame.h"
 #include "ruffini/patch/geometry.h"
 #include "ruffini/patch/spec.h"
 #include "ruffini/twin/contact.h"
@@ -37,19 +38,14 @@ struct Contact {
 };
 
 // Flags a frame can carry (same bits as dataset::FrameFlags).
-enum TwinFlags : std::uint32_t {
-  kSaturated = 1u << 0,
-  kOffPatch = 1u << 1,
-  kPeakMissing = 1u << 2,
-  kBadContact = 1u << 3,
-};
+using enum ::ruffini::FrameFlags;  // kFlagSaturated, kFlagOffPatch, kFlagPeakMissing, kFlagBadContact (ruffini/frame.h)
 
 class KernelTables;  // grating-averaged strain tables, one per contact radius
 
 class SkinTwin {
  public:
   // sphere_probe_radii_mm: the spherical probes this twin will be asked about (a contact law is built for
-  // each); a sphere contact of another radius is rejected with kBadContact.
+  // each); a sphere contact of another radius is rejected with kFlagBadContact.
   // Throws InputError when an effect names a grating that does not exist.
   SkinTwin(const patch::PatchSpec& spec, const TwinEffects& effects,
            std::vector<double> sphere_probe_radii_mm = {5.5});
@@ -57,10 +53,10 @@ class SkinTwin {
   SkinTwin(SkinTwin&&) noexcept;
 
   // Noise-free strain shifts (pm) of the 16 gratings for a set of simultaneous contacts; contributions
-  // superpose. A contact outside the patch contributes nothing and sets kOffPatch; a non-finite or
-  // negative force contributes nothing and sets kBadContact. A force beyond the layer's linear range
+  // superpose. A contact outside the patch contributes nothing and sets kFlagOffPatch; a non-finite or
+  // negative force contributes nothing and sets kFlagBadContact. A force beyond the layer's linear range
   // (indentation > 30 % of the thickness: about 4 N for the 11 mm sphere) saturates the response at that
-  // force and sets kSaturated. InterrogatorSim further clips each peak to its band.
+  // force and sets kFlagSaturated. InterrogatorSim further clips each peak to its band.
   // Real-time safe: no allocation, no lock, no throw.
   void StrainShiftsPm(std::span<const Contact> contacts, Shifts& shift_pm, std::uint32_t& flags) const noexcept;
   [[nodiscard]] Shifts StrainShiftsPm(const Contact& c) const noexcept;
