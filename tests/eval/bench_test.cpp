@@ -235,7 +235,7 @@ TEST(BenchTest, RunBenchRowsRatiosAndReport) {
   md << in.rdbuf();
   for (const char* must : {"Reproduce: `ruffini bench --model m.rmodel --data d.h5`", "| ungated p50 (us) | ungated p99 (us) | gated p50 (us) | gated p99 (us) |",
                            "| 9 | stand-in double (W=4", "| 11 | inversion, LM 1 iteration |",
-                           "| 1 | shipped pipeline (decode::Pipeline), float (W=4", "Eigen (shipped pipeline, float) vs best libtorch variant (W=4", "![Pareto](pareto.svg)"}) {
+                           "| 1 | shipped pipeline (decode::Pipeline), float (W=4", "Eigen vs best libtorch (W=4", "(row 1, shipped pipeline (decode::Pipeline), float, vs row ", "![Pareto](pareto.svg)"}) {
     EXPECT_NE(md.str().find(must), std::string::npos) << must;
   }
   EXPECT_TRUE(std::filesystem::exists(dir / "pareto.svg"));

@@ -42,18 +42,18 @@ std::string BenchTable(const BenchResult& result) {
 std::string BenchRatios(const BenchResult& result) {
   std::ostringstream md;
   auto one = [&](const char* kind, double ratio, std::size_t eigen, std::size_t best, std::size_t frames) {
-    char b[256];
+    char b[512];
     if (frames == 0) {
       std::snprintf(b, sizeof b, "%s: no such frames timed", kind);
     } else {
-      std::snprintf(b, sizeof b, "%s p50 %.1fx (row %zu vs row %zu, %s)", kind, ratio, eigen + 1, best + 1,
-                    result.rows[best].configuration.c_str());
+      std::snprintf(b, sizeof b, "%s p50 %.1fx (row %zu, %s, vs row %zu, %s)", kind, ratio, eigen + 1,
+                    result.rows[eigen].configuration.c_str(), best + 1, result.rows[best].configuration.c_str());
     }
     return std::string(b);
   };
   for (const auto& q : result.ratios) {
     const auto& eigen = result.rows[q.eigen_row].latency;
-    md << "- Eigen (shipped pipeline, float) vs best libtorch variant (" << q.weights << "), same weights, same run: "
+    md << "- Eigen vs best libtorch (" << q.weights << "), same weights, same run: "
        << one("gated", q.gated, q.eigen_row, q.best_gated_row, eigen.gated.frames) << "; "
        << one("ungated", q.ungated, q.eigen_row, q.best_ungated_row, eigen.ungated.frames) << "\n";
   }
