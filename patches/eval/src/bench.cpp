@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <optional>
 #include <set>
 #include <type_traits>
 
 #include "ruffini/decode/pipeline.h"
 #include "ruffini/error.h"
+#include "ruffini/eval/stream.h"
 #include "ruffini/stats.h"
 
 namespace ruffini::eval {
@@ -26,6 +28,33 @@ LatencyUs Summarise(std::vector<double>& ns) {
   l.p50_us = stats::Quantile(ns, 0.5) * 1e-3;
   l.p99_us = stats::Quantile(ns, 0.99) * 1e-3;
   return l;
+}
+
+// The shipped pipeline's predictions as Evaluate takes them: one continuous pass over the stream (as the
+// decoder service runs it), test frames marked; invalid frames carry NaN (Evaluate scores them as 0 N).
+template <typename Scalar>
+Predictions PipelinePredictions(const v1::DecoderModel& m, const patch::PatchSpec& spec, const dataset::Dataset& data,
+                                const std::vector<std::int32_t>& test) {
+  PipelineStep<Scalar> step(m, spec, ShippedPipelineConfig(m, data.info.sample_rate_hz));
+  const std::vector<std::uint8_t> mask = MaskOfIndentations(data, test);
+  const std::size_t n = data.size();
+  Predictions pred;
+  pred.force_n.assign(n, std::numeric_limits<float>::quiet_NaN());
+  pred.y_mm.assign(n, 0.0f);
+  pred.r_deg.assign(n, 0.0f);
+  pred.valid.assign(n, 0);
+  pred.located.assign(n, 0);
+  pred.test = mask;
+  for (std::size_t k = 0; k < n; ++k) {
+    (void)step.Step(data.wavelength_nm[k], data.flags[k]);
+    const decode::PipelineOutput& o = step.last();
+    pred.valid[k] = o.valid ? 1 : 0;
+    pred.located[k] = o.located ? 1 : 0;
+    if (o.valid) pred.force_n[k] = o.force_n;
+    pred.y_mm[k] = o.y_mm;
+    pred.r_deg[k] = o.r_deg;
+  }
+  return pred;
 }
 
 }  // namespace
@@ -54,12 +83,31 @@ std::vector<TestStretch> TestStretches(const dataset::Dataset& data, const Prepa
 
 FrameLatency MeasureFrameLatency(FrameStep& step, const dataset::Dataset& data, const Prepared& p,
                                  const std::vector<TestStretch>& stretches, std::size_t frames, std::size_t warmup_frames) {
+  if (data.flags.size() != data.size()) throw InputError("bench: the dataset has no flags per frame");
+  const bool stream = step.FollowsStream();
+  std::size_t cursor = 0;  // stream steps: the next frame of the stream they have not seen
+  // Start of a test stretch, untimed: a step that follows the stream processes every frame up to it.
+  auto start = [&](const TestStretch& s) {
+    if (!stream) {
+      step.Reset(s.baseline, p.shift_pm[s.first]);
+      return;
+    }
+    for (; cursor < s.first; ++cursor) (void)step.Step(data.wavelength_nm[cursor], data.flags[cursor]);
+  };
   // Warm-up: the first stretches, untimed (caches, lazy initialisation, a JIT's profiling runs).
+  if (stream) step.Restart();
   std::size_t warm = 0;
   for (const auto& s : stretches) {
     if (warm >= warmup_frames) break;
-    step.Reset(s.baseline, p.shift_pm[s.first]);
-    for (std::size_t k = s.first; k < s.last && warm < warmup_frames; ++k, ++warm) (void)step.Step(data.wavelength_nm[k]);
+    start(s);
+    for (std::size_t k = s.first; k < s.last && warm < warmup_frames; ++k, ++warm) {
+      (void)step.Step(data.wavelength_nm[k], data.flags[k]);
+      cursor = k + 1;
+    }
+  }
+  if (stream) {  // the timed pass starts the stream again
+    step.Restart();
+    cursor = 0;
   }
   std::vector<double> all, gated, ungated;
   all.reserve(frames);
@@ -67,18 +115,26 @@ FrameLatency MeasureFrameLatency(FrameStep& step, const dataset::Dataset& data, 
   ungated.reserve(frames);
   for (const auto& s : stretches) {
     if (all.size() >= frames) break;
-    step.Reset(s.baseline, p.shift_pm[s.first]);
+    start(s);
     for (std::size_t k = s.first; k < s.last && all.size() < frames; ++k) {
       const decode::Wavelengths& wl = data.wavelength_nm[k];
+      const std::uint32_t flags = data.flags[k];
       const auto t0 = std::chrono::steady_clock::now();
-      const decode::DecodeOutput o = step.Step(wl);  // a virtual call that updates state: never elided
+      const bool is_gated = step.Step(wl, flags);  // a virtual call that updates state: never elided
       const auto t1 = std::chrono::steady_clock::now();
+      cursor = k + 1;
       const double ns = std::chrono::duration<double, std::nano>(t1 - t0).count();
       all.push_back(ns);
-      (o.located ? gated : ungated).push_back(ns);
+      (is_gated ? gated : ungated).push_back(ns);
     }
   }
   return {Summarise(all), Summarise(gated), Summarise(ungated)};
+}
+
+decode::PipelineConfig ShippedPipelineConfig(const v1::DecoderModel& model, double sample_rate_hz) {
+  decode::PipelineConfig c;
+  c.baseline = decode::BaselineFor(model, sample_rate_hz);
+  return c;
 }
 
 std::string WeightsTag(const v1::DecoderModel& m) {
@@ -99,20 +155,31 @@ BenchResult RunBench(const std::vector<v1::DecoderModel>& models, const dataset:
   BenchResult result;
   result.frames = o.frames;
   result.warmup_frames = o.warmup_frames;
-  auto run = [&](const std::string& configuration, const std::string& weights, Runtime runtime, FrameDecoder& dec,
-                 const std::vector<std::int32_t>& test, const std::vector<TestStretch>& stretches) {
-    if (progress) progress(configuration + (weights.empty() ? "" : " (" + weights + ")"));
+  auto add = [&](const std::string& configuration, const std::string& weights, Runtime runtime, FrameStep& step,
+                 const std::vector<TestStretch>& stretches, const Predictions& pred) {
     BenchRow r;
     r.configuration = configuration;
     r.weights = weights;
     r.runtime = runtime;
-    const std::unique_ptr<FrameStep> step = MakeFrameStep(dec);
-    r.latency = MeasureFrameLatency(*step, data, p, stretches, o.frames, o.warmup_frames);
-    const Evaluation ev = Evaluate(p, RunDecoder(dec, p, test, {}, /*test_only=*/true), spec);
+    r.latency = MeasureFrameLatency(step, data, p, stretches, o.frames, o.warmup_frames);
+    const Evaluation ev = Evaluate(p, pred, spec);
     r.force_error_median_mn = ev.force_error_mn.median;
     r.location_error_median_mm = ev.location_error_mm.median;
     r.above_gate_not_located = ev.location_missed;
     result.rows.push_back(std::move(r));
+  };
+  auto run = [&](const std::string& configuration, const std::string& weights, Runtime runtime, FrameDecoder& dec,
+                 const std::vector<std::int32_t>& test, const std::vector<TestStretch>& stretches) {
+    if (progress) progress(configuration + (weights.empty() ? "" : " (" + weights + ")"));
+    const std::unique_ptr<FrameStep> step = MakeFrameStep(dec);
+    add(configuration, weights, runtime, *step, stretches, RunDecoder(dec, p, test, {}, /*test_only=*/true));
+  };
+  auto run_shipped = [&]<typename Scalar>(const std::string& configuration, const std::string& weights,
+                                          const v1::DecoderModel& m, const std::vector<std::int32_t>& test,
+                                          const std::vector<TestStretch>& stretches, Scalar) {
+    if (progress) progress(configuration + " (" + weights + ")");
+    PipelineStep<Scalar> step(m, spec, ShippedPipelineConfig(m, data.info.sample_rate_hz));
+    add(configuration, weights, Runtime::kEigen, step, stretches, PipelinePredictions<Scalar>(m, spec, data, test));
   };
   std::vector<std::int32_t> first_test;
   std::vector<TestStretch> first_stretches;
@@ -127,7 +194,9 @@ BenchResult RunBench(const std::vector<v1::DecoderModel>& models, const dataset:
       first_p = p;
     }
     const std::string tag = WeightsTag(m);
-    const std::size_t eigen_row = result.rows.size();
+    const std::size_t eigen_row = result.rows.size();  // the shipped pipeline, float: the Eigen side of the ratio
+    run_shipped("shipped pipeline (decode::Pipeline), float", tag, m, test, stretches, float{});
+    run_shipped("shipped pipeline (decode::Pipeline), double", tag, m, test, stretches, double{});
     {
       NetworkFrameDecoder<float> dec(m);
       run("paper pipeline, NIP union, float", tag, Runtime::kEigen, dec, test, stretches);

@@ -42,12 +42,12 @@ std::string BenchTable(const BenchResult& result) {
 std::string BenchRatios(const BenchResult& result) {
   std::ostringstream md;
   auto one = [&](const char* kind, double ratio, std::size_t eigen, std::size_t best, std::size_t frames) {
-    char b[256];
+    char b[512];
     if (frames == 0) {
       std::snprintf(b, sizeof b, "%s: no such frames timed", kind);
     } else {
-      std::snprintf(b, sizeof b, "%s p50 %.1fx (row %zu vs row %zu, %s)", kind, ratio, eigen + 1, best + 1,
-                    result.rows[best].configuration.c_str());
+      std::snprintf(b, sizeof b, "%s p50 %.1fx (row %zu, %s, vs row %zu, %s)", kind, ratio, eigen + 1,
+                    result.rows[eigen].configuration.c_str(), best + 1, result.rows[best].configuration.c_str());
     }
     return std::string(b);
   };
@@ -65,16 +65,23 @@ void WriteBench(const BenchResult& result, const std::string& dir, const std::st
   const std::filesystem::path d(dir);
   std::ofstream out((d / "bench.md").string());
   out << "# Speed / accuracy of the decoders\n\nReproduce: `" << command << "`\n\n"
-      << "One thread, per frame from raw wavelengths to the decoder's output (the baseline update and the decode), "
-      << result.frames << " test frames timed per configuration after " << result.warmup_frames
-      << " untimed warm-up frames (steady clock around each frame's step). Gated frames: the force gate was open and "
-         "location ran; ungated: force only. libtorch runs with one intra-op and one inter-op thread, under "
+      << "One thread, per frame from raw wavelengths to the decoded frame, " << result.frames
+      << " test frames timed per configuration after " << result.warmup_frames
+      << " untimed warm-up frames (steady clock around each frame's step). \"shipped pipeline\" rows time "
+         "decode::Pipeline::Process, the decoder service's whole per-frame path (plausibility checks, baseline frozen "
+         "by the decoder's gate, the networks, creep compensation, calibrated uncertainty), run over the whole stream "
+         "in order from its first frame (frames between test indentations processed untimed), never reset; gated: "
+         "the output's in_contact. The other rows time the baseline update and the decoder alone, each test "
+         "indentation started from the baseline tracker's state at that point of the stream; gated: the decoder "
+         "located. libtorch runs with one intra-op and one inter-op thread, under "
          "c10::InferenceMode; \"TorchScript frozen\" is the same nets as TorchScript, torch::jit::freeze and "
-         "optimize_for_inference. Errors are over the whole test set (the models' held-out indentations). Location "
+         "optimize_for_inference. Errors are over the whole test set (the models' held-out indentations); the shipped "
+         "pipeline's from one continuous pass over the stream (invalid frames count as 0 N). Location "
          "error is over the above-gate frames a decoder located; the last column counts those it did not. The "
          "inversion decoder returns at once on untouched frames (every shift under 3 pm).\n\n"
       << BenchTable(result);
-  if (!result.ratios.empty()) out << "\nLatency ratio (libtorch p50 / Eigen p50; Eigen: row of the paper pipeline, float):\n\n" << BenchRatios(result);
+  if (!result.ratios.empty()) out << "\nLatency ratio (libtorch p50 / Eigen p50; Eigen: the shipped pipeline row, decode::Pipeline<float>; the libtorch "
+                                    "rows time the baseline and the nets only, without the pipeline's checks and uncertainty):\n\n" << BenchRatios(result);
   out << "\n![Pareto](pareto.svg)\n";
   if (!out) throw InputError((d / "bench.md").string() + ": cannot write");
   plot::Figure fig("Speed vs location accuracy (test set)", "gated p50 latency per frame (us)", "location error median (mm)", 760, 480);

@@ -1,12 +1,28 @@
 #pragma once
 // The speed/accuracy bench of decoder configurations on one dataset's test set (what `ruffini bench` runs).
 //
-// Latency is per frame from raw wavelengths to the decoder's output: the timed step is FrameStep::Step (today
-// the baseline update, then the decoder), one thread, steady clock around each call, in stream order over the
-// test indentations. Each indentation starts untimed from the baseline tracker's state at that point of the
-// stream and a window filled with its first frame (as RunDecoder does), so the shifts are exactly those the
-// errors are computed from. Warm-up frames run first, untimed. Frames are split by what the decoder did:
-// gated (the gate was open: location ran) and ungated (force only). Errors are over the whole test set.
+// Latency is per frame from raw wavelengths to the decoder's output: the timed step is FrameStep::Step, one
+// thread, steady clock around each call, in stream order over the test indentations. Two kinds of step:
+//
+// - The shipped path (PipelineStep): decode::Pipeline<Scalar>::Process(wavelengths, flags, data), the one
+//   per-frame call the decoder service runs (plausibility checks, common-mode-free baseline frozen by the
+//   decoder's own gate, the networks, creep compensation, calibrated uncertainty). Its state (baseline,
+//   freeze, window, contact confirmation, creep) is carried along the whole stream and never reset, as in
+//   the service; the baseline depends on the pipeline's own gate, so no tracker state computed outside it
+//   would be its state. The bench therefore runs it over the whole stream in order, from frame 0: every
+//   frame between test indentations is processed untimed, and the frames of the test indentations are
+//   timed. This is the simplest honest option: each timed frame sees exactly the state the live stream
+//   would have given it, at the cost of replaying the untimed frames (a few seconds at most). Timing one
+//   continuous stretch instead would mix in frames outside the test set. Gated frames: the output's
+//   in_contact (the force gate open, location run).
+// - The decoders alone (BaselineThenDecode): BaselineTracker::Update then a FrameDecoder. Each indentation
+//   starts untimed from the baseline tracker's state at that point of the stream and a window filled with its
+//   first frame (as RunDecoder does), so the shifts are exactly those the errors are computed from. Gated:
+//   the decoder located (its gate was open).
+//
+// Warm-up frames (the first frames of the test indentations, reached as the timed pass would reach them) run
+// first, untimed. Errors are over the whole test set: for the shipped path from one continuous pass of the
+// pipeline (invalid frames count as 0 N, as in `ruffini evaluate`), for the others from RunDecoder.
 // libtorch is not linked here: its configurations come in through BenchOptions::extra.
 #include <cstdint>
 #include <functional>
@@ -16,6 +32,7 @@
 
 #include "ruffini/dataset/dataset.h"
 #include "ruffini/decode/baseline.h"
+#include "ruffini/decode/pipeline.h"
 #include "ruffini/eval/evaluation.h"
 #include "ruffini/eval/prepared.h"
 #include "ruffini/patch/spec.h"
@@ -23,19 +40,24 @@
 
 namespace ruffini::eval {
 
-// What the bench times per frame: raw peak wavelengths in, one decoded frame out. The one place to swap in a
-// fuller per-frame pipeline.
+// What the bench times per frame: raw peak wavelengths (and the source's flags) in, one decoded frame out.
 class FrameStep {
  public:
   virtual ~FrameStep() = default;
-  // Untimed, at the start of a test indentation: `baseline` is the tracker as the stream left it just before
-  // the indentation's first frame; `fill` fills the decoder's window.
+  // True: the step carries its own state along the stream (the shipped pipeline). The bench then calls
+  // Restart() (a fresh stream) instead of Reset() and feeds it every frame of the stream in order, untimed
+  // outside the test indentations.
+  [[nodiscard]] virtual bool FollowsStream() const noexcept { return false; }
+  virtual void Restart() {}
+  // Untimed, at the start of a test indentation (steps that do not follow the stream): `baseline` is the
+  // tracker as the stream left it just before the indentation's first frame; `fill` fills the decoder's window.
   virtual void Reset(const decode::BaselineTracker& baseline, const decode::ShiftsPm& fill) = 0;
-  // Timed: one frame.
-  virtual decode::DecodeOutput Step(const decode::Wavelengths& wavelength_nm) = 0;
+  // Timed: one frame. Returns whether the frame was gated (the force gate open: location ran).
+  virtual bool Step(const decode::Wavelengths& wavelength_nm, std::uint32_t source_flags) = 0;
 };
 
-// Today's per-frame step: BaselineTracker::Update on the raw wavelengths, then the decoder on the shifts.
+// The decoders alone: BaselineTracker::Update on the raw wavelengths, then the decoder on the shifts (the
+// source flags are not looked at). Gated: the decoder located.
 class BaselineThenDecode final : public FrameStep {
  public:
   explicit BaselineThenDecode(FrameDecoder& decoder) : decoder_(decoder) {}
@@ -43,18 +65,50 @@ class BaselineThenDecode final : public FrameStep {
     tracker_ = baseline;
     decoder_.Reset(&fill);
   }
-  decode::DecodeOutput Step(const decode::Wavelengths& wavelength_nm) override {
+  bool Step(const decode::Wavelengths& wavelength_nm, std::uint32_t /*source_flags*/) override {
     tracker_.Update(wavelength_nm, shift_pm_);
-    return decoder_.Decode(shift_pm_);
+    last_ = decoder_.Decode(shift_pm_);
+    return last_.located;
   }
+  [[nodiscard]] const decode::DecodeOutput& last() const noexcept { return last_; }
 
  private:
   FrameDecoder& decoder_;
   decode::BaselineTracker tracker_;
   decode::ShiftsPm shift_pm_{};
+  decode::DecodeOutput last_{};
 };
 
-// The per-frame step the bench times for a decoder.
+// The shipped per-frame path: decode::Pipeline<Scalar>::Process. Follows the stream (see the top of this
+// file). Gated: the output's in_contact.
+template <typename Scalar>
+class PipelineStep final : public FrameStep {
+ public:
+  PipelineStep(const v1::DecoderModel& model, const patch::PatchSpec& spec, decode::PipelineConfig config)
+      : pipeline_(model, spec, std::move(config)), data_(std::make_unique<typename decode::Pipeline<Scalar>::Data>(pipeline_)) {}
+  [[nodiscard]] bool FollowsStream() const noexcept override { return true; }
+  void Restart() override { data_ = std::make_unique<typename decode::Pipeline<Scalar>::Data>(pipeline_); }
+  // Not used by the bench (the pipeline's state is its own): a fresh stream, like Restart().
+  void Reset(const decode::BaselineTracker&, const decode::ShiftsPm&) override { Restart(); }
+  bool Step(const decode::Wavelengths& wavelength_nm, std::uint32_t source_flags) override {
+    last_ = pipeline_.Process(wavelength_nm, source_flags, *data_);
+    return last_.in_contact;
+  }
+  [[nodiscard]] const decode::PipelineOutput& last() const noexcept { return last_; }
+  [[nodiscard]] const decode::Pipeline<Scalar>& pipeline() const noexcept { return pipeline_; }
+  [[nodiscard]] const typename decode::Pipeline<Scalar>::Data& data() const noexcept { return *data_; }
+
+ private:
+  decode::Pipeline<Scalar> pipeline_;
+  std::unique_ptr<typename decode::Pipeline<Scalar>::Data> data_;
+  decode::PipelineOutput last_{};
+};
+
+// The shipped pipeline's config for a model on a stream of this rate: the defaults the decoder service and
+// `ruffini decode` use, baseline from decode::BaselineFor.
+decode::PipelineConfig ShippedPipelineConfig(const v1::DecoderModel& model, double sample_rate_hz);
+
+// The per-frame step the bench times for a decoder alone.
 std::unique_ptr<FrameStep> MakeFrameStep(FrameDecoder& decoder);
 
 // One test indentation as the bench replays it: frames [first, last) and the baseline tracker just before.
@@ -74,7 +128,8 @@ struct LatencyUs {
 struct FrameLatency {
   LatencyUs all, gated, ungated;  // gated: the decoder located (gate open); ungated: force only
 };
-// Runs warmup_frames untimed, then times up to `frames` steps over the stretches (each starting with Reset).
+// Runs warmup_frames untimed, then times up to `frames` steps over the stretches (each starting with Reset;
+// a step that follows the stream is restarted once per pass and fed the frames between stretches untimed).
 FrameLatency MeasureFrameLatency(FrameStep& step, const dataset::Dataset& data, const Prepared& prepared,
                                  const std::vector<TestStretch>& stretches, std::size_t frames, std::size_t warmup_frames);
 
@@ -104,8 +159,10 @@ struct BenchRow {
   std::size_t above_gate_not_located = 0;
 };
 
-// Eigen runtime (paper pipeline, float) against the fastest libtorch configuration on the same weights, in
-// the same run: ratio = libtorch p50 / Eigen p50 (> 1: Eigen is faster), gated and ungated frames apart.
+// The shipped pipeline (decode::Pipeline<float>, Eigen runtime) against the fastest libtorch configuration on
+// the same weights, in the same run: ratio = libtorch p50 / shipped p50 (> 1: the shipped path is faster),
+// gated and ungated frames apart. The libtorch rows time the baseline and the nets only (no plausibility
+// checks, no uncertainty): the comparison is tilted towards libtorch, never away from it.
 struct BenchRatio {
   std::string weights;
   std::size_t eigen_row = 0;                          // index into rows
@@ -121,8 +178,8 @@ struct BenchResult {
 
 using BenchProgress = std::function<void(const std::string& configuration)>;
 
-// Every configuration of every model: the paper pipeline (float, double), each grid alone (float), the
-// extra configurations; then the inversion decoder (response map fitted outside the first model's test set).
+// Every configuration of every model: the shipped pipeline (decode::Pipeline, float and double), the paper
+// pipeline's decoder alone (float, double), each grid alone (float), the extra configurations; then the inversion decoder (response map fitted outside the first model's test set).
 // The models must match `spec` (decode::CheckModelMatchesPatch) and have been trained on `data`.
 BenchResult RunBench(const std::vector<v1::DecoderModel>& models, const dataset::Dataset& data,
                      const patch::PatchSpec& spec, const BenchOptions& options, const BenchProgress& progress = {});
