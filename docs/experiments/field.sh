@@ -39,6 +39,10 @@ echo "+ creep compensation (shipped field model):"; run --model "$out/forearm-fi
 for c in 0.03 0.05 0.1; do
   echo "+ contact confirmation $c s:"; run --model "$out/forearm-field.rmodel" --data field_s10.h5 --contact-confirm-s $c --report "$out/v_conf$c"
 done
+for q in 1.0 1.5 2.0; do
+  echo "+ quiet release $q pm (field):"; run --model "$out/forearm-field.rmodel" --data field_s10.h5 --quiet-release-pm $q --report "$out/v_q${q}_f"
+  echo "+ quiet release $q pm (paper seed 2):"; run --model "$out/forearm.rmodel" --data paper_seed2.h5 --quiet-release-pm $q --report "$out/v_q${q}_p"
+done
 echo "== paper seed 2 (validation): creep compensation where the cover is elastic"
 echo "lab model:"; run --model "$out/forearm.rmodel" --data paper_seed2.h5 --report "$out/v_lab_paper"
 echo "field model:"; run --model "$out/forearm-field.rmodel" --data paper_seed2.h5 --report "$out/v_field_paper"

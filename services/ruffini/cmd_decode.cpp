@@ -149,6 +149,7 @@ void RegisterEvaluate(CLI::App& app) {
     bool inversion = true;
     bool gate_freeze = true;
     double confirm_s = decode::PipelineConfig{}.contact_confirm_s;
+    double quiet_pm = decode::PipelineConfig{}.quiet_release_pm;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("evaluate", "Evaluate a model: decode as one stream, score honestly and as the paper did; write a report folder");
@@ -161,6 +162,8 @@ void RegisterEvaluate(CLI::App& app) {
   cmd->add_flag("--inversion,!--no-inversion", a->inversion, "Also score the inversion decoder (training data only)")->capture_default_str();
   cmd->add_option("--contact-confirm-s", a->confirm_s, "Report a contact once the force gate has been open this long")
       ->check(CLI::Range(0.0, 1.0))->capture_default_str();
+  cmd->add_option("--quiet-release-pm", a->quiet_pm, "No contact on a frame where no grating moves by more than this (0: off)")
+      ->check(CLI::Range(0.0, 100.0))->capture_default_str();
   cmd->add_flag("--gate-freeze,!--no-gate-freeze", a->gate_freeze,
                   "The decoder's gate freezes the baseline (--no-gate-freeze: only large shifts do, the old tracker)")
       ->capture_default_str();
@@ -181,6 +184,7 @@ void RegisterEvaluate(CLI::App& app) {
     decode::PipelineConfig pcfg;
     pcfg.freeze_on_gate = a->gate_freeze;
     pcfg.contact_confirm_s = a->confirm_s;
+    pcfg.quiet_release_pm = a->quiet_pm;
     const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", pcfg);
     const auto mask = eval::MaskOfIndentations(d, test);
     eval::Predictions pred;
@@ -275,6 +279,7 @@ void RegisterEvaluate(CLI::App& app) {
     for (const auto& item : a->also) command += " --also " + item;
     if (!a->gate_freeze) command += " --no-gate-freeze";
     if (a->confirm_s != decode::PipelineConfig{}.contact_confirm_s) command += " --contact-confirm-s " + std::to_string(a->confirm_s);
+    if (a->quiet_pm != decode::PipelineConfig{}.quiet_release_pm) command += " --quiet-release-pm " + std::to_string(a->quiet_pm);
     eval::WriteReport(a->report, m, a->data, p, pred, ev, spec, command, extra, h.str());
     eval::WriteStreamPredictions(a->report + "/stream_predictions.h5", sp, a->model, a->data);
     std::printf("honest: force %.1f mN all frames (%.1f mN against the load cell), %.1f mN above 50 mN; location above 50 mN %.2f mm (misses as failures), "

@@ -302,3 +302,32 @@ TEST(PipelineTest, CreepCompensationInvertsThePronyFilter) {
 
 }  // namespace
 }  // namespace ruffini::decode
+
+namespace ruffini::decode {
+namespace {
+
+// quiet_release_pm: a frame on which no grating moves is no contact, whatever the window remembers.
+TEST(PipelineTest, QuietReleaseCutsTheWindowsLag) {
+  auto m = testing::SyntheticModel(Spec(), 8);
+  auto* w = m.mutable_force()->mutable_conv(0)->mutable_weight();  // read the oldest frame of the window
+  w->set_values((0 * 8 + 7) * 16 + 7, 0.0f);
+  w->set_values((0 * 8 + 0) * 16 + 7, 1.0f);
+  for (const double q : {0.0, 1.0}) {
+    PipelineConfig cfg = Open();
+    cfg.quiet_release_pm = q;
+    Fixture f(m, cfg);
+    for (int k = 0; k < 20; ++k) EXPECT_TRUE(f.Press(300.0f).in_contact);
+    const auto released = f.Press(0.5f);  // 0.5 pm: noise level; the window's oldest frame still reads 0.3 N
+    if (q > 0) {
+      EXPECT_FALSE(released.in_contact);
+      EXPECT_EQ(released.force_n, 0.0f);
+      EXPECT_TRUE(f.Press(1.5f).in_contact);  // a grating above the threshold: the nets decide again
+    } else {
+      EXPECT_TRUE(released.in_contact);
+      EXPECT_NEAR(released.force_n, 0.3f, 1e-3f);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace ruffini::decode

@@ -179,7 +179,16 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   out.force_n = o.force_n;
   d.gate_ = o.in_contact;
   d.open_run_ = o.in_contact ? d.open_run_ + 1 : 0;
-  const bool contact = o.in_contact && d.open_run_ > confirm_frames_;
+  bool quiet = false;
+  if (config_.quiet_release_pm > 0) {
+    float peak = 0.0f;
+    for (float v : shift) {
+      if (std::isfinite(v)) peak = std::max(peak, std::abs(v));
+    }
+    quiet = peak < static_cast<float>(config_.quiet_release_pm);
+  }
+  const bool contact = o.in_contact && d.open_run_ > confirm_frames_ && !quiet;
+  if (quiet) out.force_n = 0.0f;
   if (contact && !d.contact_) ++d.counters_.onsets;
   d.contact_ = contact;
   out.in_contact = contact;

@@ -48,6 +48,9 @@ struct PipelineConfig {
   // A contact is reported once the force gate has stayed open this long (0: at once). Filters the single
   // noisy frames that cross the gate at rest, at the price of this much onset latency.
   double contact_confirm_s = 0.0;
+  // A frame on which no grating moves by more than this (pm, common mode removed) is no contact, whatever
+  // the force net's window still remembers (0: off). Cuts the window's lag after a release.
+  double quiet_release_pm = 0.0;
   bool freeze_on_gate = true;  // the decoder's gate drives the baseline's freeze (false: the shifts do, as before v1.1)
 };
 
