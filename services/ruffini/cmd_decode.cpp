@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 #include <limits>
+#include <set>
 #include <memory>
 #include <sstream>
 
@@ -365,7 +366,14 @@ void RegisterCalibrate(CLI::App& app) {
     const auto t0 = std::chrono::steady_clock::now();
     ModelAndData md = LoadModelAndData(a->model, a->data, a->patch_spec);
     const dataset::Dataset cal = eval::FirstIndentations(md.data, a->indentations);
-    spdlog::info("calibrating on {} frames ({} requested indentations)", cal.size(), a->indentations);
+    std::set<std::int32_t> ids(cal.indentation.begin(), cal.indentation.end());
+    ids.erase(-1);
+    constexpr std::size_t kMinIndentations = 20;
+    if (ids.size() < kMinIndentations) {
+      throw InputError(a->data + ": calibration needs at least " + std::to_string(kMinIndentations) +
+                       " indentations; the data hold " + std::to_string(ids.size()));
+    }
+    spdlog::info("calibrating on {} frames, {} indentations", cal.size(), ids.size());
     v1::DecoderModel m = md.model;
     if (a->gains) {
       const eval::GainFit g = eval::FitGains(m, md.spec, cal, a->sweeps, [](int s, int n, double obj) {
