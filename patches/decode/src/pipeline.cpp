@@ -27,6 +27,10 @@ std::string_view ReasonName(Reason r) noexcept {
 
 BaselineConfig BaselineFor(const v1::DecoderModel& model, double sample_rate_hz) {
   BaselineConfig c;
+  // The frame counts are the 100 Hz defaults; keep their durations at any rate (1 s capture, 0.2 s release).
+  const double scale = sample_rate_hz / 100.0;
+  c.capture_frames = std::max(1, static_cast<int>(std::lround(c.capture_frames * scale)));
+  c.release_frames = std::max(1, static_cast<int>(std::lround(c.release_frames * scale)));
   c.sample_rate_hz = sample_rate_hz;
   c.common_mode = model.preprocessing().common_mode_removed();
   if (model.preprocessing().thermal_ratio_size() == static_cast<int>(kGratings)) {

@@ -42,12 +42,12 @@ using ShiftsPm = std::array<float, kGratings>;
 
 struct BaselineConfig {
   double sample_rate_hz = 100.0;
-  int capture_frames = 100;
+  int capture_frames = 100;     // 1 s at 100 Hz (BaselineFor scales frame counts to the stream rate)
   double capture_tolerance_pm = 3.0;
   double drift_tau_s = 30.0;
   double touch_on_pm = 3.0;
   double touch_off_pm = 1.5;
-  int release_frames = 20;
+  int release_frames = 20;      // 0.2 s at 100 Hz
   bool common_mode = true;       // remove each frame's median shift (see above); false = the paper's raw shifts
   int min_common_mode_gratings = 9;  // fewer present gratings: no common-mode estimate (shifts left raw)
   double common_mode_tau_s = 1.0;    // while frozen, the baseline follows the common mode with this filter

@@ -131,7 +131,8 @@ class Pipeline {
 extern template class Pipeline<float>;
 extern template class Pipeline<double>;
 
-// The baseline settings a model was trained with (common mode), at the stream's rate.
+// The baseline settings a model was trained with (common mode, thermal ratios), at the stream's rate: the
+// capture (1 s) and release (0.2 s) keep their durations at any rate.
 BaselineConfig BaselineFor(const v1::DecoderModel& model, double sample_rate_hz);
 
 }  // namespace ruffini::decode
