@@ -151,6 +151,7 @@ void RegisterEvaluate(CLI::App& app) {
     bool gate_freeze = true;
     double confirm_s = decode::PipelineConfig{}.contact_confirm_s;
     double quiet_pm = decode::PipelineConfig{}.quiet_release_pm;
+    double quiet_drop = decode::PipelineConfig{}.quiet_release_drop;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("evaluate", "Evaluate a model: decode as one stream, score honestly and as the paper did; write a report folder");
@@ -165,6 +166,9 @@ void RegisterEvaluate(CLI::App& app) {
       ->check(CLI::Range(0.0, 1.0))->capture_default_str();
   cmd->add_option("--quiet-release-pm", a->quiet_pm, "No contact on a frame where no grating moves by more than this (0: off)")
       ->check(CLI::Range(0.0, 100.0))->capture_default_str();
+  cmd->add_option("--quiet-release-drop", a->quiet_drop,
+                  "Quiet release only after a drop from this many times the threshold (0: always)")
+      ->check(CLI::Range(0.0, 1000.0))->capture_default_str();
   cmd->add_flag("--gate-freeze,!--no-gate-freeze", a->gate_freeze,
                   "The decoder's gate freezes the baseline (--no-gate-freeze: only large shifts do, the old tracker)")
       ->capture_default_str();
@@ -186,6 +190,7 @@ void RegisterEvaluate(CLI::App& app) {
     pcfg.freeze_on_gate = a->gate_freeze;
     pcfg.contact_confirm_s = a->confirm_s;
     pcfg.quiet_release_pm = a->quiet_pm;
+    pcfg.quiet_release_drop = a->quiet_drop;
     const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", pcfg);
     const auto mask = eval::MaskOfIndentations(d, test);
     eval::Predictions pred;
@@ -281,6 +286,7 @@ void RegisterEvaluate(CLI::App& app) {
     if (!a->gate_freeze) command += " --no-gate-freeze";
     if (a->confirm_s != decode::PipelineConfig{}.contact_confirm_s) command += " --contact-confirm-s " + std::to_string(a->confirm_s);
     if (a->quiet_pm != decode::PipelineConfig{}.quiet_release_pm) command += " --quiet-release-pm " + std::to_string(a->quiet_pm);
+    if (a->quiet_drop != decode::PipelineConfig{}.quiet_release_drop) command += " --quiet-release-drop " + std::to_string(a->quiet_drop);
     eval::WriteReport(a->report, m, a->data, p, pred, ev, spec, command, extra, h.str());
     eval::WriteStreamPredictions(a->report + "/stream_predictions.h5", sp, a->model, a->data);
     std::printf("honest: force %.1f mN all frames (%.1f mN against the load cell), %.1f mN above 50 mN; location above 50 mN %.2f mm (misses as failures), "

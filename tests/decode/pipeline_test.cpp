@@ -239,7 +239,9 @@ TEST(PipelineTest, ALongGapRestartsTheWindow) {
   auto* w = m.mutable_force()->mutable_conv(0)->mutable_weight();
   w->set_values((0 * 8 + 7) * 16 + 7, 0.0f);
   w->set_values((0 * 8 + 0) * 16 + 7, 1.0f);
-  Fixture f(m);
+  PipelineConfig cfg = Open();
+  cfg.quiet_release_pm = 0.0;  // this test looks at the window itself
+  Fixture f(m, cfg);
   for (int k = 0; k < 20; ++k) f.Press(300.0f);
   // The oldest frame of the window is still pressed (the frame before the gate opened cost the press
   // 1/3000 of itself: W / (tau x rate), documented in baseline.h).
@@ -327,6 +329,26 @@ TEST(PipelineTest, QuietReleaseCutsTheWindowsLag) {
       EXPECT_NEAR(released.force_n, 0.3f, 1e-3f);
     }
   }
+}
+
+}  // namespace
+}  // namespace ruffini::decode
+
+namespace ruffini::decode {
+namespace {
+
+// With quiet_release_drop, a light press that never moves a grating by much is left to the nets: only a
+// drop from a real press is cut.
+TEST(PipelineTest, QuietReleaseOnlyAfterADrop) {
+  PipelineConfig cfg = Open();
+  cfg.quiet_release_pm = 1.0;
+  cfg.quiet_release_drop = 4.0;
+  auto m = testing::SyntheticModel(Spec());
+  m.mutable_force()->set_output_scale_n(0.1f);  // 0.5 pm reads 50 mN, above the gate: a "light press"
+  Fixture f(m, cfg);
+  for (int k = 0; k < 200; ++k) ASSERT_TRUE(f.Press(0.8f).in_contact) << k;  // never above 4 x 1 pm: kept
+  for (int k = 0; k < 5; ++k) f.Press(30.0f);
+  EXPECT_FALSE(f.Press(0.8f).in_contact);  // the same shift right after 30 pm: a release, cut
 }
 
 }  // namespace

@@ -81,6 +81,10 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
     throw InputError("pipeline: contact_confirm_s must be 0..1 s");
   }
   confirm_frames_ = static_cast<int>(std::lround(config_.contact_confirm_s * config_.baseline.sample_rate_hz));
+  peak_decay_ = static_cast<float>(std::exp(-1.0 / (0.5 * config_.baseline.sample_rate_hz)));
+  if (!(config_.quiet_release_pm >= 0 && config_.quiet_release_drop >= 0)) {
+    throw InputError("pipeline: quiet_release_pm and quiet_release_drop must be >= 0");
+  }
 }
 
 template <typename Scalar>
@@ -189,7 +193,11 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
     for (float v : shift) {
       if (std::isfinite(v)) peak = std::max(peak, std::abs(v));
     }
-    quiet = peak < static_cast<float>(config_.quiet_release_pm);
+    const float before = d.recent_peak_pm_;
+    d.recent_peak_pm_ = std::max(peak, before * peak_decay_);
+    quiet = peak < static_cast<float>(config_.quiet_release_pm) &&
+            (config_.quiet_release_drop <= 0 ||
+             before >= static_cast<float>(config_.quiet_release_drop * config_.quiet_release_pm));
   }
   const bool contact = o.in_contact && d.open_run_ > confirm_frames_ && !quiet;
   if (quiet) out.force_n = 0.0f;

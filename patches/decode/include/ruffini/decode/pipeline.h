@@ -50,7 +50,11 @@ struct PipelineConfig {
   double contact_confirm_s = 0.0;
   // A frame on which no grating moves by more than this (pm, common mode removed) is no contact, whatever
   // the force net's window still remembers (0: off). Cuts the window's lag after a release.
-  double quiet_release_pm = 0.0;
+  double quiet_release_pm = 1.0;
+  // > 0: the quiet release applies only after a drop, when the largest shift of the last moments (decaying
+  // with a 0.5 s time constant) was at least this many times the threshold. A light press that never moves
+  // a grating by much keeps being decided by the nets.
+  double quiet_release_drop = 4.0;
   bool freeze_on_gate = true;  // the decoder's gate drives the baseline's freeze (false: the shifts do, as before v1.1)
 };
 
@@ -99,6 +103,7 @@ class Pipeline {
     int open_run_ = 0;      // consecutive valid frames with the force gate open
     bool gate_ = false;     // the decoder's force gate (drives the baseline)
     bool contact_ = false;  // the reported contact (the gate, confirmed)
+    float recent_peak_pm_ = 0.0f;  // largest |shift| lately, decaying (quiet release after a drop)
   };
 
   // One interrogator frame. Real-time safe: no allocation, no lock, no throw.
@@ -126,6 +131,7 @@ class Pipeline {
   float position_floor_mm2_ = 0.0f;
   double mm_per_deg_ = 0.0;
   int confirm_frames_ = 0;
+  float peak_decay_ = 0.0f;
 };
 
 extern template class Pipeline<float>;
