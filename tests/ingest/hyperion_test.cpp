@@ -327,7 +327,8 @@ void ExpectFraming(const Bytes& bad, Reason reason, DecoderConfig config = {}) {
 TEST(HyperionReject, ContentTooLong) {
   RawFrame f = PatchFrame(1);
   f.content_length = 4097;
-  ExpectFraming(Bytes(f.Bytes_().begin(), f.Bytes_().begin() + 8), Reason::kContentTooLong,
+  Bytes b = f.Bytes_();
+  ExpectFraming(Bytes(b.begin(), b.begin() + 8), Reason::kContentTooLong,
                 {.max_content_bytes = 4096});
   f.content_length = 0xffffffff;  // never allocated, never waited for
   ExpectFraming(f.Bytes_(), Reason::kContentTooLong);
@@ -336,9 +337,11 @@ TEST(HyperionReject, ContentTooLong) {
 TEST(HyperionReject, ContentTooShort) {
   RawFrame f;
   f.content_length = 24;  // a peaks header without the counts
-  ExpectFraming(Bytes(f.Bytes_().begin(), f.Bytes_().begin() + 32), Reason::kContentTooShort);
+  Bytes b = f.Bytes_();
+  ExpectFraming(Bytes(b.begin(), b.begin() + 32), Reason::kContentTooShort);
   f.content_length = 0;
-  ExpectFraming(Bytes(f.Bytes_().begin(), f.Bytes_().begin() + 8), Reason::kContentTooShort);
+  b = f.Bytes_();
+  ExpectFraming(Bytes(b.begin(), b.begin() + 8), Reason::kContentTooShort);
 }
 
 TEST(HyperionReject, BadPeaksLength) {
