@@ -4,6 +4,9 @@
 # libtorch (Debian's libtorch-dev) is for training only: `ruffini train` and the libtorch comparison in
 # `ruffini bench`; the decoders never link it. The tests train small models, so it is installed by default;
 # `--no-training` skips it (the build then leaves `train` out).
+# clang-14 is only for the Hyperion codec's libFuzzer target (tests/fuzz); libclang-rt-14-dev holds libFuzzer
+# and the sanitizer runtimes (clang-14 only recommends it, and we install without recommends). Without them the
+# fuzz test reports SKIPPED.
 set -euo pipefail
 
 packages=(
@@ -13,6 +16,7 @@ packages=(
   libboost-dev prometheus-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev liburdfdom-dev
+  clang-14 libclang-rt-14-dev
 )
 if [[ "${1:-}" != "--no-training" ]]; then
   packages+=(libtorch-dev)

@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# Runs the Hyperion codec fuzzer and prints how many inputs it executed and how many crashed.
+#   tests/fuzz/run.sh [seconds]            fuzz for that long (default 60)
+#   tests/fuzz/run.sh --runs N [--seed S]  a fixed number of runs (what ctest does)
+# The binary is $RUFFINI_FUZZ_BIN or build/release/bin/hyperion_fuzz; it exists only when clang++-14 with
+# libFuzzer was found at configure time. Without it the script says SKIPPED and exits 77.
+# The seed corpus in tests/fuzz/corpus is copied to a scratch directory first, so it is never modified;
+# crashing inputs are kept under $RUFFINI_FUZZ_WORK/run.*/artifacts (a
+# passing run's directory is removed).
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/../.." && pwd)
+bin=${RUFFINI_FUZZ_BIN:-$root/build/release/bin/hyperion_fuzz}
+base=${RUFFINI_FUZZ_WORK:-$root/build/release/tests/fuzz/work}
+
+seconds=60 runs="" seed=""
+while (($#)); do
+  case "$1" in
+    --runs) runs=$2; shift 2 ;;
+    --seed) seed=$2; shift 2 ;;
+    [0-9]*) seconds=$1; shift ;;
+    *) echo "usage: $0 [seconds] | --runs N [--seed S]" >&2; exit 2 ;;
+  esac
+done
+
+if [[ ! -x "$bin" ]]; then
+  echo "SKIPPED: $bin not built (needs clang++-14 and libclang-rt-14-dev: deploy/install-deps.sh)"
+  exit 77
+fi
+
+# A directory of its own per run: ctest and a long run may go at once.
+mkdir -p "$base"
+work=$(mktemp -d "$base/run.XXXXXX")
+mkdir -p "$work/corpus" "$work/artifacts"
+cp "$here"/corpus/* "$work/corpus/"
+args=(-print_final_stats=1 -artifact_prefix="$work/artifacts/" -max_len=4096)
+if [[ -n "$runs" ]]; then args+=(-runs="$runs"); else args+=(-max_total_time="$seconds"); fi
+if [[ -n "$seed" ]]; then args+=(-seed="$seed"); fi
+
+set +e
+"$bin" "${args[@]}" "$work/corpus" >"$work/log.txt" 2>&1
+rc=$?
+set -e
+
+execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$work/log.txt" | tail -n 1 | grep -o '[0-9]*$' || true)
+crashes=$(find "$work/artifacts" -type f | wc -l)
+echo "executions: ${execs:-unknown}"
+echo "crashes: $crashes"
+echo "corpus: $(ls "$work/corpus" | wc -l) inputs"
+if ((rc != 0 || crashes != 0)); then
+  tail -n 40 "$work/log.txt"
+  echo "kept: $work"
+  exit 1
+fi
+rm -rf "$work"
