@@ -36,12 +36,18 @@ $B calibrate --model cm_w16.rmodel --data paper_seed2.h5 --indentations 0 --no-g
   --out "$out/thermal_only.rmodel" > /dev/null
 echo "+ thermal ratios:"; run --model "$out/thermal_only.rmodel" --data field_s10.h5 --report "$out/v_thermal"
 echo "+ creep compensation (shipped field model):"; run --model "$out/forearm-field.rmodel" --data field_s10.h5 --report "$out/v_field"
+echo "+ quiet release off:"; run --model "$out/forearm-field.rmodel" --data field_s10.h5 --quiet-release-pm 0 --report "$out/v_field_q0"
 for c in 0.03 0.05 0.1; do
   echo "+ contact confirmation $c s:"; run --model "$out/forearm-field.rmodel" --data field_s10.h5 --contact-confirm-s $c --report "$out/v_conf$c"
 done
+for qd in "1.0 4" "1.0 8" "1.5 4"; do
+  set -- $qd
+  echo "quiet release $1 pm after a $2x drop (field):"; run --model "$out/forearm-field.rmodel" --data field_s10.h5 --quiet-release-pm $1 --quiet-release-drop $2 --report "$out/v_qd$1_$2_f"
+  echo "quiet release $1 pm after a $2x drop (paper seed 2):"; run --model "$out/forearm.rmodel" --data paper_seed2.h5 --quiet-release-pm $1 --quiet-release-drop $2 --report "$out/v_qd$1_$2_p"
+done
 for q in 1.0 1.5 2.0; do
-  echo "+ quiet release $q pm (field):"; run --model "$out/forearm-field.rmodel" --data field_s10.h5 --quiet-release-pm $q --report "$out/v_q${q}_f"
-  echo "+ quiet release $q pm (paper seed 2):"; run --model "$out/forearm.rmodel" --data paper_seed2.h5 --quiet-release-pm $q --report "$out/v_q${q}_p"
+  echo "+ quiet release $q pm (field):"; run --model "$out/forearm-field.rmodel" --data field_s10.h5 --quiet-release-pm $q --quiet-release-drop 0 --report "$out/v_q${q}_f"
+  echo "+ quiet release $q pm (paper seed 2):"; run --model "$out/forearm.rmodel" --data paper_seed2.h5 --quiet-release-pm $q --quiet-release-drop 0 --report "$out/v_q${q}_p"
 done
 echo "== paper seed 2 (validation): creep compensation where the cover is elastic"
 echo "lab model:"; run --model "$out/forearm.rmodel" --data paper_seed2.h5 --report "$out/v_lab_paper"
