@@ -1,0 +1,325 @@
+// The real ruffini-sim process on 127.0.0.1 (port 0, --ports-file), read by plain POSIX sockets and the
+// ingest codec. Every wait is a condition with a deadline; the sim is always stopped by pid (SIGTERM, then
+// SIGKILL after a timeout) and reaped.
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "ruffini/dataset/dataset.h"
+#include "ruffini/ingest/hyperion.h"
+
+namespace {
+
+using namespace ruffini;
+using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+constexpr std::size_t kRows = 37;
+
+double RowNm(std::size_t row, std::size_t g) { return 1530.0 + 2.5 * double(g) + 0.001 * double(row); }
+
+// A tiny dataset made here: row r, grating g at 1530 + 2.5 g + 0.001 r nm (all distinct, in the window).
+std::string MakeDataset(const std::string& dir) {
+  dataset::Dataset d;
+  d.info.patch_name = "forearm";
+  d.info.source = "sim_process_test";
+  for (std::size_t r = 0; r < kRows; ++r) {
+    dataset::Frame f;
+    for (std::size_t g = 0; g < kGratings; ++g) f.wavelength_nm[g] = RowNm(r, g);
+    f.serial = r;
+    f.t_s = double(r) * 0.01;
+    d.Append(f);
+  }
+  const std::string path = dir + "/replay.h5";
+  dataset::WriteDataset(path, d);
+  return path;
+}
+
+class Sim {
+ public:
+  // Starts ruffini-sim with the given extra arguments; waits (10 s at most) for its ports file.
+  explicit Sim(const std::string& name, std::vector<std::string> extra = {}) {
+    dir_ = (fs::current_path() / ("sim_" + name)).string();
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    const std::string replay = MakeDataset(dir_);
+    ports_file_ = dir_ + "/ports";
+    std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", std::string(RUFFINI_SOURCE_DIR) +
+                                     "/config/scenes/forearm.yaml", "--replay", replay, "--rate-hz", "1000",
+                                     "--host", "127.0.0.1", "--command-port", "0", "--stream-port", "0",
+                                     "--ports-file", ports_file_};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const std::string out = dir_ + "/stdout", err = dir_ + "/stderr";
+    pid_ = fork();
+    if (pid_ == 0) {
+      const int o = open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      dup2(o, 1);
+      dup2(e, 2);
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(argv[0], argv.data());
+      _exit(127);
+    }
+    const auto deadline = Clock::now() + std::chrono::seconds(10);
+    while (Clock::now() < deadline) {
+      std::ifstream in(ports_file_);
+      std::string k1, k2;
+      unsigned c = 0, s = 0;
+      if (in >> k1 >> c >> k2 >> s && k1 == "command" && k2 == "stream") {
+        command_port_ = static_cast<std::uint16_t>(c);
+        stream_port_ = static_cast<std::uint16_t>(s);
+        return;
+      }
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        ADD_FAILURE() << "ruffini-sim exited early: " << Slurp(err);
+        return;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    ADD_FAILURE() << "no ports file within 10 s";
+  }
+  ~Sim() { Stop(); }
+
+  // SIGTERM, then SIGKILL after 5 s; returns the exit status (or -1).
+  int Stop() {
+    if (pid_ <= 0) return exit_status_;
+    kill(pid_, SIGTERM);
+    const auto deadline = Clock::now() + std::chrono::seconds(5);
+    int status = 0;
+    for (;;) {
+      if (waitpid(pid_, &status, WNOHANG) == pid_) break;
+      if (Clock::now() > deadline) {
+        kill(pid_, SIGKILL);
+        waitpid(pid_, &status, 0);
+        ADD_FAILURE() << "ruffini-sim ignored SIGTERM for 5 s";
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    pid_ = -1;
+    exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return exit_status_;
+  }
+
+  static std::string Slurp(const std::string& path) {
+    std::ifstream in(path);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  }
+  [[nodiscard]] std::string stdout_text() const { return Slurp(dir_ + "/stdout"); }
+  [[nodiscard]] bool ok() const { return pid_ > 0 && stream_port_ != 0; }
+  std::uint16_t command_port_ = 0, stream_port_ = 0;
+
+ private:
+  std::string dir_, ports_file_;
+  pid_t pid_ = -1;
+  int exit_status_ = -1;
+};
+
+// A loopback TCP connection with a 5 s receive timeout.
+class Conn {
+ public:
+  explicit Conn(std::uint16_t port) {
+    fd_ = socket(AF_INET, SOCK_STREAM, 0);
+    timeval tv{5, 0};
+    setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    setsockopt(fd_, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(port);
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    connected_ = connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
+  }
+  ~Conn() {
+    if (fd_ >= 0) close(fd_);
+  }
+  [[nodiscard]] bool connected() const { return connected_; }
+  // Bytes read (0: the peer closed; -1: error or timeout).
+  ssize_t Read(std::uint8_t* p, std::size_t n) { return recv(fd_, p, n, 0); }
+  bool Send(const std::vector<std::uint8_t>& b) { return send(fd_, b.data(), b.size(), MSG_NOSIGNAL) == ssize_t(b.size()); }
+
+ private:
+  int fd_ = -1;
+  bool connected_ = false;
+};
+
+struct Received {
+  std::vector<std::uint64_t> serials;
+  std::vector<std::int64_t> timestamps_ns;
+  std::vector<Wavelengths> channel0;
+  std::vector<ingest::Reason> rejected;
+  bool closed = false;
+  ingest::Counters counters;
+};
+
+// Reads until at least `frames` frames and rejections in all (whole reads: it may return a few more), the peer closes, or 10 s pass.
+Received ReadFrames(Conn& c, std::size_t frames) {
+  Received r;
+  ingest::StreamDecoder decoder;
+  std::vector<std::uint8_t> buf(65536);
+  const auto deadline = Clock::now() + std::chrono::seconds(10);
+  while (r.serials.size() + r.rejected.size() < frames && Clock::now() < deadline) {
+    const ssize_t n = c.Read(buf.data(), buf.size());
+    if (n == 0) {
+      r.closed = true;
+      break;
+    }
+    if (n < 0) break;
+    std::span<const std::uint8_t> rest(buf.data(), std::size_t(n));
+    while (!rest.empty()) {
+      const auto res = decoder.Feed(rest);
+      rest = rest.subspan(res.consumed);
+      if (res.status == ingest::StreamDecoder::Status::kFrame) {
+        r.serials.push_back(decoder.frame().serial_number);
+        r.timestamps_ns.push_back(decoder.frame().timestamp_ns);
+        r.channel0.push_back(decoder.wavelength_nm());
+      } else if (res.status == ingest::StreamDecoder::Status::kRejected) {
+        r.rejected.push_back(res.reason);
+      } else if (res.status == ingest::StreamDecoder::Status::kNeedsResync) {
+        ADD_FAILURE() << "framing error: " << ingest::ReasonName(res.reason);
+        r.counters = decoder.counters();
+        return r;
+      }
+    }
+  }
+  r.counters = decoder.counters();
+  return r;
+}
+
+std::optional<std::vector<std::uint8_t>> Ask(Conn& c, const char* command, ingest::Reply& reply) {
+  if (!c.Send(ingest::EncodeCommand(command))) return std::nullopt;
+  std::vector<std::uint8_t> in;
+  std::uint8_t buf[4096];
+  const auto deadline = Clock::now() + std::chrono::seconds(5);
+  while (Clock::now() < deadline) {
+    const auto r = ingest::DecodeReply(in, reply);
+    if (r.status == ingest::MessageResult::Status::kOk) {
+      in.resize(r.consumed);
+      ingest::DecodeReply(in, reply);  // views into the returned buffer's final storage below
+      return in;
+    }
+    if (r.status == ingest::MessageResult::Status::kRejected) return std::nullopt;
+    const ssize_t n = c.Read(buf, sizeof buf);
+    if (n <= 0) return std::nullopt;
+    in.insert(in.end(), buf, buf + n);
+  }
+  return std::nullopt;
+}
+
+TEST(SimProcess, StreamsTheReplayedDatasetWithConsecutiveSerialsToSeveralClients) {
+  Sim sim("stream");
+  ASSERT_TRUE(sim.ok());
+  EXPECT_NE(sim.stdout_text().find("ports: command " + std::to_string(sim.command_port_) + " stream " +
+                                   std::to_string(sim.stream_port_)),
+            std::string::npos)
+      << sim.stdout_text();
+  Conn a(sim.stream_port_), b(sim.stream_port_);
+  ASSERT_TRUE(a.connected());
+  ASSERT_TRUE(b.connected());
+  const auto ra = ReadFrames(a, 500);
+  const auto rb = ReadFrames(b, 100);
+  ASSERT_GE(ra.serials.size(), 500u);
+  ASSERT_GE(rb.serials.size(), 100u);
+  EXPECT_TRUE(ra.rejected.empty());
+  for (const auto* r : {&ra, &rb}) {
+    for (std::size_t i = 1; i < r->serials.size(); ++i) ASSERT_EQ(r->serials[i], r->serials[i - 1] + 1) << i;
+    for (std::size_t i = 0; i < r->serials.size(); ++i) {
+      const std::size_t row = std::size_t(r->serials[i] % kRows);
+      for (std::size_t g = 0; g < kGratings; ++g) ASSERT_EQ(r->channel0[i][g], RowNm(row, g)) << i << " " << g;
+    }
+  }
+  EXPECT_EQ(ra.counters.lost_samples, 0u);
+  // Unix-ns timestamps, now-ish; 500 samples at 1 kHz span about 0.5 s (loose: a loaded machine lags).
+  const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                          std::chrono::system_clock::now().time_since_epoch()).count();
+  EXPECT_LT(std::llabs(now_ns - ra.timestamps_ns.back()), 10'000'000'000LL);
+  const double span_s = double(ra.timestamps_ns.back() - ra.timestamps_ns.front()) * 1e-9;
+  EXPECT_GT(span_s, 0.45);
+  EXPECT_LT(span_s, 1.5);
+  EXPECT_EQ(sim.Stop(), 0);  // SIGTERM: a clean exit
+}
+
+TEST(SimProcess, AnswersCommands) {
+  Sim sim("command");
+  ASSERT_TRUE(sim.ok());
+  Conn c(sim.command_port_);
+  ASSERT_TRUE(c.connected());
+  ingest::Reply r;
+  auto bytes = Ask(c, "#GetDutChannelCount", r);
+  ASSERT_TRUE(bytes);
+  ASSERT_EQ(r.status, 0);
+  ASSERT_EQ(r.content.size(), 4u);
+  std::uint32_t n = 0;
+  std::memcpy(&n, r.content.data(), 4);
+  EXPECT_EQ(n, 1u);  // forearm.yaml: one patch
+  bytes = Ask(c, "#NoSuchCommand", r);
+  ASSERT_TRUE(bytes);
+  EXPECT_NE(r.status, 0);
+  EXPECT_TRUE(r.content.empty());
+  EXPECT_FALSE(r.message.empty());
+  bytes = Ask(c, "#isready", r);
+  ASSERT_TRUE(bytes);
+  ASSERT_EQ(r.content.size(), 1u);
+  EXPECT_EQ(r.content[0], 1);
+  bytes = Ask(c, "#GetSerialNumber", r);
+  ASSERT_TRUE(bytes);
+  EXPECT_EQ(r.status, 0);
+  EXPECT_FALSE(r.content.empty());
+  bytes = Ask(c, "#GetPeaks", r);
+  ASSERT_TRUE(bytes);
+  ASSERT_EQ(r.status, 0);
+  std::vector<double> storage(64);
+  ingest::PeakFrame f;
+  ASSERT_EQ(ingest::ParsePeaks(r.content, storage, f), ingest::Reason::kOk);
+  ASSERT_EQ(f.count[0], 16);
+  const std::size_t row = std::size_t(f.serial_number % kRows);
+  EXPECT_EQ(f.channel(0)[3], RowNm(row, 3));
+  // Streaming off: a stream client gets nothing; on again: frames flow.
+  bytes = Ask(c, "#DisablePeakDataStreaming", r);
+  ASSERT_TRUE(bytes);
+  EXPECT_EQ(r.status, 0);
+  bytes = Ask(c, "#EnablePeakDataStreaming", r);
+  ASSERT_TRUE(bytes);
+  Conn s(sim.stream_port_);
+  EXPECT_GE(ReadFrames(s, 10).serials.size(), 10u);
+  EXPECT_EQ(sim.Stop(), 0);
+}
+
+TEST(SimProcess, FaultsDropNanAndDisconnect) {
+  Sim sim("faults", {"--drop-every", "10", "--nan-every", "7", "--disconnect-after", "100"});
+  ASSERT_TRUE(sim.ok());
+  Conn c(sim.stream_port_);
+  ASSERT_TRUE(c.connected());
+  const auto r = ReadFrames(c, 1000);
+  EXPECT_TRUE(r.closed);                                   // disconnected after 100 frames
+  EXPECT_EQ(r.serials.size() + r.rejected.size(), 100u);
+  EXPECT_GT(r.counters.lost_samples, 0u);                 // serial gaps
+  ASSERT_FALSE(r.rejected.empty());
+  for (auto reason : r.rejected) EXPECT_EQ(reason, ingest::Reason::kNonFinite);
+  for (auto s : r.serials) {
+    EXPECT_NE((s + 1) % 10, 0u) << s;  // dropped samples never arrive
+    EXPECT_NE((s + 1) % 7, 0u) << s;   // NaN samples are rejected by the decoder
+  }
+  EXPECT_EQ(sim.Stop(), 0);
+}
+
+}  // namespace
