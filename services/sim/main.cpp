@@ -14,6 +14,7 @@
 
 #include "ruffini/dataset/dataset.h"
 #include "ruffini/error.h"
+#include "ruffini/sim/scenario.h"
 #include "ruffini/sim/server.h"
 #include "ruffini/sim/source.h"
 #include "ruffini/twin/scene.h"
@@ -42,7 +43,8 @@ int main(int argc, char** argv) {
   std::string scene_path, scenario_path, replay_path, ports_file;
   ruffini::sim::ServerConfig config;
   app.add_option("--scene", scene_path, "Scene YAML: one channel per patch")->required()->check(CLI::ExistingFile);
-  auto* scenario = app.add_option("--scenario", scenario_path, "Scripted contacts on the live twin (YAML)");
+  auto* scenario = app.add_option("--scenario", scenario_path, "Scripted presses on the live twin (YAML)")
+                       ->check(CLI::ExistingFile);
   auto* replay = app.add_option("--replay", replay_path, "Dataset (HDF5) to replay, looping")->check(CLI::ExistingFile);
   scenario->excludes(replay);
   replay->excludes(scenario);
@@ -64,7 +66,8 @@ int main(int argc, char** argv) {
       source = std::make_unique<ruffini::sim::ReplaySource>(ruffini::dataset::ReadDataset(replay_path),
                                                             scene.patches.size());
     } else {
-      throw ruffini::InputError("--scenario: scripted scenarios are not implemented yet; use --replay");
+      source = std::make_unique<ruffini::sim::ScriptedSource>(
+          scene, ruffini::sim::LoadScenario(scenario_path, scene), config.rate_hz);
     }
     ruffini::sim::SimServer server(config, std::move(source));
     std::printf("ports: command %u stream %u\n", static_cast<unsigned>(server.command_port()),

@@ -54,14 +54,15 @@ std::string MakeDataset(const std::string& dir) {
 class Sim {
  public:
   // Starts ruffini-sim with the given extra arguments; waits (10 s at most) for its ports file.
-  explicit Sim(const std::string& name, std::vector<std::string> extra = {}) {
+  // source: {} replays a dataset written here; else the arguments that name the source (e.g. --scenario F).
+  explicit Sim(const std::string& name, std::vector<std::string> extra = {}, std::vector<std::string> source = {}) {
     dir_ = (fs::current_path() / ("sim_" + name)).string();
     fs::remove_all(dir_);
     fs::create_directories(dir_);
-    const std::string replay = MakeDataset(dir_);
+    if (source.empty()) source = {"--replay", MakeDataset(dir_)};
     ports_file_ = dir_ + "/ports";
     std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", std::string(RUFFINI_SOURCE_DIR) +
-                                     "/config/scenes/forearm.yaml", "--replay", replay, "--rate-hz", "1000",
+                                     "/config/scenes/forearm.yaml", source[0], source[1], "--rate-hz", "1000",
                                      "--host", "127.0.0.1", "--command-port", "0", "--stream-port", "0",
                                      "--ports-file", ports_file_};
     args.insert(args.end(), extra.begin(), extra.end());
@@ -319,6 +320,18 @@ TEST(SimProcess, FaultsDropNanAndDisconnect) {
     EXPECT_NE((s + 1) % 10, 0u) << s;  // dropped samples never arrive
     EXPECT_NE((s + 1) % 7, 0u) << s;   // NaN samples are rejected by the decoder
   }
+  EXPECT_EQ(sim.Stop(), 0);
+}
+
+TEST(SimProcess, StreamsTheLiveTwinUnderAScenario) {
+  Sim sim("scenario", {}, {"--scenario", std::string(RUFFINI_SOURCE_DIR) + "/config/scenarios/forearm-presses.yaml"});
+  ASSERT_TRUE(sim.ok());
+  Conn c(sim.stream_port_);
+  ASSERT_TRUE(c.connected());
+  const auto r = ReadFrames(c, 300);
+  ASSERT_GE(r.serials.size(), 300u);  // 16 ascending in-window peaks on channel 0, or the decoder refuses
+  EXPECT_TRUE(r.rejected.empty());
+  for (std::size_t i = 1; i < r.serials.size(); ++i) ASSERT_EQ(r.serials[i], r.serials[i - 1] + 1) << i;
   EXPECT_EQ(sim.Stop(), 0);
 }
 

@@ -93,3 +93,65 @@ TEST(AnswerCommand, UnknownCommandGetsTheVendorErrorReply) {
 }
 
 }  // namespace
+
+#include <filesystem>
+#include <fstream>
+
+#include "ruffini/sim/scenario.h"
+#include "ruffini/twin/scene.h"
+
+namespace {
+
+const std::string kScene = std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/forearm.yaml";
+
+TEST(Press, RampsHoldsAndReleases) {
+  sim::Press p;
+  p.t_s = 1.0;
+  p.force_n = 2.0;
+  p.ramp_s = 0.5;
+  p.hold_s = 1.0;
+  p.release_s = 0.5;
+  EXPECT_EQ(p.ForceAt(0.9), 0.0);
+  EXPECT_DOUBLE_EQ(p.ForceAt(1.25), 1.0);
+  EXPECT_DOUBLE_EQ(p.ForceAt(2.0), 2.0);
+  EXPECT_DOUBLE_EQ(p.ForceAt(2.75), 1.0);
+  EXPECT_EQ(p.ForceAt(3.1), 0.0);
+  EXPECT_DOUBLE_EQ(p.end_s(), 3.0);
+}
+
+TEST(Scenario, TheShippedScenarioLoadsAndAnUnknownPatchIsNamed) {
+  const auto scene = twin::LoadScene(kScene);
+  const auto s = sim::LoadScenario(std::string(RUFFINI_SOURCE_DIR) + "/config/scenarios/forearm-presses.yaml", scene);
+  EXPECT_EQ(s.presses.size(), 2u);
+  EXPECT_DOUBLE_EQ(s.duration_s, 4.0);
+  const auto bad = (std::filesystem::current_path() / "bad_scenario.yaml").string();
+  std::ofstream(bad) << "presses:\n  - {t_s: 0, patch: elbow, y_mm: 0, r_deg: 0, force_n: 1}\n";
+  try {
+    (void)sim::LoadScenario(bad, scene);
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("elbow"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ScriptedSource, APressShiftsThePeaksAndTheyComeBackAfterRelease) {
+  const auto scene = twin::LoadScene(kScene);
+  sim::Scenario s;
+  s.duration_s = 2.0;
+  s.presses.push_back({0.5, 0, 24.0, 72.0, 1.5, 0.1, 0.5, 0.1});
+  sim::ScriptedSource src(scene, s, 1000.0);
+  ASSERT_EQ(src.channels(), 1u);
+  std::vector<Wavelengths> rest(1), held(1), after(1);
+  src.Sample(100, rest);    // 0.1 s: nothing
+  src.Sample(900, held);    // 0.9 s: holding 1.5 N
+  src.Sample(1500, after);  // 1.5 s: released
+  double max_held = 0.0, max_after = 0.0;
+  for (std::size_t g = 0; g < kGratings; ++g) {
+    max_held = std::max(max_held, std::abs(held[0][g] - rest[0][g]));
+    max_after = std::max(max_after, std::abs(after[0][g] - rest[0][g]));
+  }
+  EXPECT_GT(max_held, 0.010);   // above 10 pm somewhere at 1.5 N
+  EXPECT_LT(max_after, 0.005);  // only noise (0.3 pm sigma) after release
+}
+
+}  // namespace

@@ -1,0 +1,63 @@
+#pragma once
+// A scripted scenario for the live twin: presses on the scene's patches, each a force profile that ramps up
+// linearly, holds and releases linearly.
+//
+//   loop: true              # optional (default true): the script restarts after duration_s
+//   duration_s: 4           # optional: the script's length (default: the end of its last press)
+//   seed: 1                 # optional: interrogator noise seed
+//   presses:
+//     - {t_s: 0.5, patch: forearm, y_mm: 10, r_deg: 0, force_n: 1.5, ramp_s: 0.2, hold_s: 0.5, release_s: 0.2}
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "ruffini/sim/source.h"
+#include "ruffini/twin/scene.h"
+#include "ruffini/twin/twin.h"
+
+namespace ruffini::sim {
+
+struct Press {
+  double t_s = 0.0;          // start of the ramp
+  std::size_t patch = 0;     // index into the scene's patches
+  double y_mm = 0.0, r_deg = 0.0;
+  double force_n = 0.0;      // held force
+  double ramp_s = 0.0, hold_s = 0.0, release_s = 0.0;
+  [[nodiscard]] double end_s() const noexcept { return t_s + ramp_s + hold_s + release_s; }
+  // Applied force at time t (0 outside the press).
+  [[nodiscard]] double ForceAt(double t) const noexcept;
+};
+
+struct Scenario {
+  std::string source;
+  bool loop = true;
+  double duration_s = 0.0;
+  std::uint64_t seed = 1;
+  std::vector<Press> presses;
+};
+
+// Loads and validates against the scene (patch names). Throws InputError with file:line:col and the key.
+Scenario LoadScenario(const std::string& path, const twin::Scene& scene);
+
+// The live twin under a scenario: one SkinTwin and one InterrogatorSim per patch (patch i on channel i).
+// Sample k is at t = k / rate_hz (modulo duration_s when looping). No viscoelasticity yet.
+class ScriptedSource final : public FrameSource {
+ public:
+  // Throws InputError for more than 16 patches or a probe the twin cannot model.
+  ScriptedSource(const twin::Scene& scene, Scenario scenario, double rate_hz);
+  ~ScriptedSource() override;
+  [[nodiscard]] std::size_t channels() const noexcept override { return twins_.size(); }
+  void Sample(std::uint64_t sample, std::span<Wavelengths> out) override;
+
+ private:
+  Scenario scenario_;
+  twin::Probe probe_;
+  double rate_hz_;
+  std::vector<std::unique_ptr<twin::SkinTwin>> twins_;
+  std::vector<std::unique_ptr<twin::InterrogatorSim>> sims_;
+  std::vector<twin::Contact> contacts_;
+};
+
+}  // namespace ruffini::sim
