@@ -206,6 +206,7 @@ Received ReadFrames(Conn& c, std::size_t frames) {
   return r;
 }
 
+// Sends a command and reads its reply. `reply` views the returned buffer: keep it while reading `reply`.
 std::optional<std::vector<std::uint8_t>> Ask(Conn& c, const char* command, ingest::Reply& reply) {
   if (!c.Send(ingest::EncodeCommand(command))) return std::nullopt;
   std::vector<std::uint8_t> in;
@@ -295,13 +296,34 @@ TEST(SimProcess, AnswersCommands) {
   const std::size_t row = std::size_t(f.serial_number % kRows);
   EXPECT_EQ(f.channel(0)[3], RowNm(row, 3));
   // Streaming off: a stream client gets nothing; on again: frames flow.
+  // Streaming off: samples go on being taken (and numbered) but not sent, so a connected client sees a serial
+  // gap once streaming is on again. Wait (bounded) until #GetPeaks shows 5 samples taken while off.
+  Conn s(sim.stream_port_);
+  ASSERT_TRUE(s.connected());
+  const auto before = ReadFrames(s, 10);
+  ASSERT_GE(before.serials.size(), 10u);
   bytes = Ask(c, "#DisablePeakDataStreaming", r);
   ASSERT_TRUE(bytes);
   EXPECT_EQ(r.status, 0);
+  bytes = Ask(c, "#GetPeaks", r);
+  ASSERT_TRUE(bytes);
+  ASSERT_EQ(ingest::ParsePeaks(r.content, storage, f), ingest::Reason::kOk);
+  const std::uint64_t off_at = f.serial_number;
+  const auto deadline = Clock::now() + std::chrono::seconds(5);
+  while (f.serial_number < off_at + 5 && Clock::now() < deadline) {
+    bytes = Ask(c, "#GetPeaks", r);
+    ASSERT_TRUE(bytes);
+    ASSERT_EQ(ingest::ParsePeaks(r.content, storage, f), ingest::Reason::kOk);
+  }
+  ASSERT_GE(f.serial_number, off_at + 5);
   bytes = Ask(c, "#EnablePeakDataStreaming", r);
   ASSERT_TRUE(bytes);
-  Conn s(sim.stream_port_);
-  EXPECT_GE(ReadFrames(s, 10).serials.size(), 10u);
+  EXPECT_EQ(r.status, 0);
+  const auto after = ReadFrames(s, 200);
+  ASSERT_GE(after.serials.size(), 200u);
+  bool gap = false;
+  for (std::size_t i = 1; i < after.serials.size(); ++i) gap = gap || after.serials[i] > after.serials[i - 1] + 1;
+  EXPECT_TRUE(gap || after.serials.front() > before.serials.back() + 1);
   EXPECT_EQ(sim.Stop(), 0);
 }
 
@@ -321,6 +343,43 @@ TEST(SimProcess, FaultsDropNanAndDisconnect) {
     EXPECT_NE((s + 1) % 7, 0u) << s;   // NaN samples are rejected by the decoder
   }
   EXPECT_EQ(sim.Stop(), 0);
+}
+
+TEST(SimProcess, APortInUseIsAnInputError) {
+  Sim first("port_owner");
+  ASSERT_TRUE(first.ok());
+  const std::string dir = (fs::current_path() / "sim_port_clash").string();
+  fs::create_directories(dir);
+  const std::string err = dir + "/stderr";
+  std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", std::string(RUFFINI_SOURCE_DIR) +
+                                   "/config/scenes/forearm.yaml", "--replay", MakeDataset(dir),
+                                   "--command-port", std::to_string(first.command_port_), "--stream-port", "0"};
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(e, 2);
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  int status = 0;
+  const auto deadline = Clock::now() + std::chrono::seconds(10);
+  while (waitpid(pid, &status, WNOHANG) != pid) {
+    if (Clock::now() > deadline) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+      FAIL() << "the second ruffini-sim did not exit";
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_NE(Sim::Slurp(err).find("--command-port: cannot listen on 127.0.0.1:" + std::to_string(first.command_port_)),
+            std::string::npos)
+      << Sim::Slurp(err);
+  EXPECT_EQ(first.Stop(), 0);
 }
 
 TEST(SimProcess, StreamsTheLiveTwinUnderAScenario) {
