@@ -63,8 +63,12 @@ int main(int argc, char** argv) {
     const auto scene = ruffini::twin::LoadScene(scene_path);
     std::unique_ptr<ruffini::sim::FrameSource> source;
     if (!replay_path.empty()) {
-      source = std::make_unique<ruffini::sim::ReplaySource>(ruffini::dataset::ReadDataset(replay_path),
-                                                            scene.patches.size());
+      auto data = ruffini::dataset::ReadDataset(replay_path);
+      if (data.info.sample_rate_hz != config.rate_hz) {
+        spdlog::warn("{} was sampled at {} Hz; replaying it at --rate-hz {}", replay_path, data.info.sample_rate_hz,
+                     config.rate_hz);
+      }
+      source = std::make_unique<ruffini::sim::ReplaySource>(std::move(data), scene.patches.size());
     } else {
       source = std::make_unique<ruffini::sim::ScriptedSource>(
           scene, ruffini::sim::LoadScenario(scenario_path, scene), config.rate_hz);

@@ -148,9 +148,9 @@ struct SimServer::Impl {
     if (f.nan_every != 0 && (k + 1) % f.nan_every == 0) peaks[0][0] = std::numeric_limits<double>::quiet_NaN();
     ingest::PeakSample s;
     s.serial_number = k;
-    s.timestamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                         std::chrono::system_clock::now().time_since_epoch())
-                         .count();
+    // The sample's own time (its deadline), on the Unix clock: exactly one period apart, even when a late
+    // wake-up sends several samples at once.
+    s.timestamp_ns = unix_start_ns + std::chrono::duration_cast<std::chrono::nanoseconds>(Deadline(k) - start).count();
     for (std::size_t c = 0; c < peaks.size(); ++c) {
       std::size_t n = 0;
       const bool inject = c == 0 && f.nan_every != 0 && (k + 1) % f.nan_every == 0;
@@ -328,6 +328,9 @@ struct SimServer::Impl {
     AcceptCommand();
     AcceptStream();
     start = std::chrono::steady_clock::now();
+    unix_start_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                        std::chrono::system_clock::now().time_since_epoch())
+                        .count();
     next_sample = 0;
     Tick();
     io.run();
@@ -346,6 +349,7 @@ struct SimServer::Impl {
   std::vector<Wavelengths> peaks;
   std::array<Wavelengths, ingest::kChannels> seen{};
   std::chrono::steady_clock::time_point start;
+  std::int64_t unix_start_ns = 0;  // Unix time at `start`
   std::uint64_t next_sample = 0;
   bool stopped = false;
   std::uint16_t bound_command_port = 0;
