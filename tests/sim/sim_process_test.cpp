@@ -253,6 +253,16 @@ TEST(SimProcess, StreamsTheReplayedDatasetWithConsecutiveSerialsToSeveralClients
     }
   }
   EXPECT_EQ(ra.counters.lost_samples, 0u);
+  {
+    // A client going away leaves the others served: a third one connects, leaves, and `a` reads on.
+    Conn gone(sim.stream_port_);
+    ASSERT_TRUE(gone.connected());
+    ASSERT_GE(ReadFrames(gone, 5).serials.size(), 5u);
+  }
+  const auto more = ReadFrames(a, 200);
+  ASSERT_GE(more.serials.size(), 200u);
+  EXPECT_EQ(more.serials.front(), ra.serials.back() + 1);
+  EXPECT_EQ(more.counters.lost_samples, 0u);
   // Unix-ns timestamps, now-ish.
   const auto now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
                           std::chrono::system_clock::now().time_since_epoch()).count();

@@ -173,6 +173,7 @@ struct SimServer::Impl {
       auto& cl = *it;
       if (cl->closed) {
         it = streams.erase(it);
+        spdlog::info("stream client gone ({} now)", streams.size());
         continue;
       }
       if (!cl->closing) {
