@@ -154,4 +154,33 @@ TEST(ScriptedSource, APressShiftsThePeaksAndTheyComeBackAfterRelease) {
   EXPECT_LT(max_after, 0.005);  // only noise (0.3 pm sigma) after release
 }
 
+TEST(ScriptedSource, AViscoelasticSceneCreepsUnderAHeldPressAndLeavesAResidual) {
+  const auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/forearm-field-nodrift.yaml");
+  ASSERT_TRUE(scene.effects.viscoelastic.has_value());
+  sim::Scenario s;
+  s.duration_s = 10.0;
+  s.presses.push_back({0.5, 0, 24.0, 72.0, 2.0, 0.05, 3.0, 0.05});
+  sim::ScriptedSource src(scene, s, 1000.0);
+  std::vector<Wavelengths> w(1), rest(1), early(1), late(1), after(1);
+  for (std::uint64_t k = 0; k <= 3700; ++k) {  // rising k: the filter steps once per sample
+    src.Sample(k, w);
+    if (k == 400) rest = w;
+    if (k == 700) early = w;   // 0.15 s into the hold
+    if (k == 3500) late = w;   // 2.95 s into the hold
+    if (k == 3700) after = w;  // 0.15 s after release
+  }
+  std::size_t g_max = 0;
+  for (std::size_t g = 0; g < kGratings; ++g) {
+    if (std::abs(early[0][g] - rest[0][g]) > std::abs(early[0][g_max] - rest[0][g_max])) g_max = g;
+  }
+  const double d_early = std::abs(early[0][g_max] - rest[0][g_max]);
+  const double d_late = std::abs(late[0][g_max] - rest[0][g_max]);
+  const double d_after = std::abs(after[0][g_max] - rest[0][g_max]);
+  EXPECT_GT(d_early, 0.010);
+  EXPECT_GT(d_late, d_early * 1.02);       // creep: about 12 % in all, about 5 % within 3 s
+  EXPECT_LT(d_late, d_early * 1.15);
+  EXPECT_GT(d_after, 0.02 * d_early);      // a residual after release
+  EXPECT_LT(d_after, 0.2 * d_early);
+}
+
 }  // namespace

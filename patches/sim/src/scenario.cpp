@@ -65,6 +65,12 @@ ScriptedSource::ScriptedSource(const twin::Scene& scene, Scenario scenario, doub
     sims_.push_back(std::make_unique<twin::InterrogatorSim>(*twins_.back(), twin::DeriveSeed(scenario_.seed, i)));
   }
   contacts_.reserve(scenario_.presses.size());
+  if (scene.effects.viscoelastic) {
+    for (std::size_t i = 0; i < scene.patches.size(); ++i) {
+      sites_.emplace_back(&*scene.effects.viscoelastic, 1.0 / rate_hz_, probe_);
+    }
+    current_press_.assign(scene.patches.size(), std::numeric_limits<std::size_t>::max());
+  }
 }
 
 ScriptedSource::~ScriptedSource() = default;
@@ -73,15 +79,35 @@ void ScriptedSource::Sample(std::uint64_t sample, std::span<Wavelengths> out) {
   const double t_abs = static_cast<double>(sample) / rate_hz_;
   const double t = scenario_.loop ? std::fmod(t_abs, scenario_.duration_s) : t_abs;
   for (std::size_t c = 0; c < twins_.size() && c < out.size(); ++c) {
-    contacts_.clear();
-    for (const auto& p : scenario_.presses) {
-      if (p.patch != c) continue;
-      const double f = p.ForceAt(t);
-      if (f > 0.0) contacts_.push_back(twin::Contact{{p.y_mm, p.r_deg}, f, probe_});
-    }
     twin::Shifts s{};
     std::uint32_t flags = 0;
-    twins_[c]->StrainShiftsPm(contacts_, s, flags);
+    if (!sites_.empty()) {
+      // One probe per patch: the latest press that has started drives the filter.
+      std::size_t latest = std::numeric_limits<std::size_t>::max();
+      for (std::size_t i = 0; i < scenario_.presses.size(); ++i) {
+        const auto& p = scenario_.presses[i];
+        if (p.patch == c && p.t_s <= t &&
+            (latest == std::numeric_limits<std::size_t>::max() || p.t_s >= scenario_.presses[latest].t_s)) {
+          latest = i;
+        }
+      }
+      double f = 0.0;
+      if (latest != std::numeric_limits<std::size_t>::max()) {
+        const auto& p = scenario_.presses[latest];
+        if (latest != current_press_[c]) sites_[c].MoveTo({p.y_mm, p.r_deg});
+        f = p.ForceAt(t);
+      }
+      current_press_[c] = latest;
+      twins_[c]->StrainShiftsPm(sites_[c].Step(f), s, flags);
+    } else {
+      contacts_.clear();
+      for (const auto& p : scenario_.presses) {
+        if (p.patch != c) continue;
+        const double f = p.ForceAt(t);
+        if (f > 0.0) contacts_.push_back(twin::Contact{{p.y_mm, p.r_deg}, f, probe_});
+      }
+      twins_[c]->StrainShiftsPm(contacts_, s, flags);
+    }
     sims_[c]->Read(t_abs, s, out[c], flags);
   }
 }

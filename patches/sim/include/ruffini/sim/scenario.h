@@ -16,6 +16,7 @@
 #include "ruffini/sim/source.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
+#include "ruffini/twin/viscoelastic.h"
 
 namespace ruffini::sim {
 
@@ -42,7 +43,10 @@ struct Scenario {
 Scenario LoadScenario(const std::string& path, const twin::Scene& scene);
 
 // The live twin under a scenario: one SkinTwin and one InterrogatorSim per patch (patch i on channel i).
-// Sample k is at t = k / rate_hz (modulo duration_s when looping). No viscoelasticity yet.
+// Sample k is at t = k / rate_hz (modulo duration_s when looping). Sample() must be called with rising k.
+// With the scene's viscoelastic effect, each patch has one probe: the latest press that has started on it
+// drives a ViscoelasticSites (creep while held, fading residuals after release and at earlier sites); other
+// presses overlapping it on the same patch are ignored. Without it, overlapping presses superpose.
 class ScriptedSource final : public FrameSource {
  public:
   // Throws InputError for more than 16 patches or a probe the twin cannot model.
@@ -57,6 +61,8 @@ class ScriptedSource final : public FrameSource {
   double rate_hz_;
   std::vector<std::unique_ptr<twin::SkinTwin>> twins_;
   std::vector<std::unique_ptr<twin::InterrogatorSim>> sims_;
+  std::vector<twin::ViscoelasticSites> sites_;     // one per patch when the scene is viscoelastic
+  std::vector<std::size_t> current_press_;         // per patch: index of the press the probe is at (or npos)
   std::vector<twin::Contact> contacts_;
 };
 
