@@ -137,11 +137,6 @@ eval::StreamPredictions DecodeWithProgress(const v1::DecoderModel& m, const patc
   return pred;
 }
 
-std::string Pct(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.1f %%", 100.0 * v);
-  return b;
-}
 
 void RegisterEvaluate(CLI::App& app) {
   struct Args {
@@ -205,19 +200,8 @@ void RegisterEvaluate(CLI::App& app) {
     const eval::StreamMetrics sm = eval::ScoreStream(d, sp, spec, mask, ev.rg_location_guess);
 
     // The honest section: streaming decode, misses scored as failures, false contacts, field rows.
-    std::ostringstream h;
-    h << "## Scored as a skeptical reviewer would\n\n"
-      << "Every frame decoded in stream order through `decode::Pipeline` (the decoder service's code: baseline tracked "
-         "throughout, no resets at indentation boundaries). Reference force: the applied force where the data has it (twin), "
-         "else the load cell. Location above 50 mN counts every frame that was not located (gate closed or frame invalid) "
-         "as a failure scored at the random guess's error (guess "
-      << sm.guess.y_mm << " mm, " << sm.guess.r_deg << " deg). A false contact is a frame reported in contact whose true "
-      << "force is under 20 mN. Scored data: "
-      << (training_data ? "the model's held-out test indentations of its training data (knobs were chosen on this data "
-                          "in earlier sessions: read it as a validation figure)"
-                        : "unseen data (another seed or cast): every indentation")
-      << ".\n\n" << eval::StreamMetricsHeader() << eval::StreamMetricsRow("`" + a->data + "`", sm);
-    std::vector<std::pair<std::string, eval::StreamMetrics>> rows;
+    std::vector<eval::StreamReportRow> rows{{"`" + a->data + "`", sm}};
+    std::vector<std::string> also_labels;
     for (const std::string& item : a->also) {
       const auto eq = item.find('=');
       if (eq == std::string::npos || eq == 0 || eq + 1 == item.size()) throw InputError("--also " + item + ": expected LABEL=FILE.h5");
@@ -229,35 +213,12 @@ void RegisterEvaluate(CLI::App& app) {
       for (std::size_t k = 0; k < other.size(); ++k) {
         if (other.indentation[k] >= 0 && (ids.empty() || ids.back() != other.indentation[k])) ids.push_back(other.indentation[k]);
       }
-      const auto om = eval::ScoreStream(other, osp, spec, eval::MaskOfIndentations(other, ids), ev.rg_location_guess);
-      h << eval::StreamMetricsRow(label + " (`" + path + "`)", om);
-      rows.emplace_back(label, om);
+      also_labels.push_back(label);
+      rows.push_back({label + " (`" + path + "`)",
+                      eval::ScoreStream(other, osp, spec, eval::MaskOfIndentations(other, ids), ev.rg_location_guess)});
     }
-    h << "\nAcross the whole stream (every frame, not only the scored ones):\n\n| data | false contacts (< 20 mN) | longest baseline freeze | longest press | invalid frames by reason |\n|---|---|---|---|---|\n";
-    auto whole = [&](const std::string& label, const dataset::Dataset& dd, const eval::StreamPredictions& pp) {
-      const auto w = eval::ScoreStream(dd, pp, spec, {}, ev.rg_location_guess);
-      std::string reasons;
-      for (std::size_t r = 1; r < decode::kReasonCount; ++r) {
-        if (w.reasons[r] == 0) continue;
-        reasons += std::string(reasons.empty() ? "" : ", ") + std::string(decode::ReasonName(static_cast<decode::Reason>(r))) + " " + std::to_string(w.reasons[r]);
-      }
-      char b[256];
-      std::snprintf(b, sizeof b, "| %s | %.3f %% (%zu of %zu) | %.1f s | %.1f s | %s |\n", label.c_str(), 100.0 * w.false_contact_rate,
-                    w.false_contacts, w.quiet_frames, w.longest_frozen_s, w.longest_press_s, reasons.empty() ? "none" : reasons.c_str());
-      h << b;
-    };
-    whole("`" + a->data + "`", d, sp);
-    h << "\n### Per force bin (`" << a->data << "`, scored frames)\n\n" << eval::ForceBinTable(sm);
-    h << "\n### Uncertainty\n\n";
-    if (m.has_uncertainty()) {
-      h << "Calibrated on `" << m.uncertainty().source() << "`. Share of in-contact frames whose force error is within 1 / 2 sd (target 68 +- 5 % / 95 +- 3 %): "
-        << Pct(sm.force_within_1sd) << " / " << Pct(sm.force_within_2sd) << " (" << sm.force_cov_frames
-        << " frames); located frames above 50 mN whose position lies inside the 1 / 2 sigma ellipse (chi-square(2) 2.30 / 6.18): "
-        << Pct(sm.position_within_1sd) << " / " << Pct(sm.position_within_2sd) << " (" << sm.position_cov_frames << " frames).\n";
-    } else {
-      h << "The model carries no calibrated uncertainty (run `ruffini calibrate` on validation data).\n";
-    }
-    h << "\n";
+    const eval::StreamMetrics whole = eval::ScoreStream(d, sp, spec, {}, ev.rg_location_guess);
+    const std::string front = eval::StreamReportSection(rows, whole, training_data, m.has_uncertainty() ? &m.uncertainty() : nullptr);
 
     std::string extra;
     if (training_data && a->inversion) {
@@ -287,13 +248,15 @@ void RegisterEvaluate(CLI::App& app) {
     if (a->confirm_s != decode::PipelineConfig{}.contact_confirm_s) command += " --contact-confirm-s " + std::to_string(a->confirm_s);
     if (a->quiet_pm != decode::PipelineConfig{}.quiet_release_pm) command += " --quiet-release-pm " + std::to_string(a->quiet_pm);
     if (a->quiet_drop != decode::PipelineConfig{}.quiet_release_drop) command += " --quiet-release-drop " + std::to_string(a->quiet_drop);
-    eval::WriteReport(a->report, m, a->data, p, pred, ev, spec, command, extra, h.str());
+    eval::WriteReport(a->report, m, a->data, p, pred, ev, spec, command, extra, front);
     eval::WriteStreamPredictions(a->report + "/stream_predictions.h5", sp, a->model, a->data);
     std::printf("honest: force %.1f mN all frames (%.1f mN against the load cell), %.1f mN above 50 mN; location above 50 mN %.2f mm (misses as failures), "
                 "%.2f mm located only; miss rate above 100 mN %.2f %%; false contacts %.3f %%\n",
                 sm.force_all_mn.median, sm.force_all_loadcell_mn.median, sm.force_above_mn.median, sm.location_above_mm.median, sm.location_located_mm.median,
                 100.0 * sm.miss_rate_above_100mn, 100.0 * sm.false_contact_rate);
-    for (const auto& [label, om] : rows) {
+    for (std::size_t r = 1; r < rows.size(); ++r) {
+      const std::string& label = also_labels[r - 1];
+      const eval::StreamMetrics& om = rows[r].scored;
       std::printf("%s: force %.1f mN all, %.1f mN above 50 mN; location %.2f mm; false contacts %.3f %%\n", label.c_str(),
                   om.force_all_mn.median, om.force_above_mn.median, om.location_above_mm.median, 100.0 * om.false_contact_rate);
     }
@@ -316,15 +279,7 @@ void RegisterDecode(CLI::App& app) {
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
     const ModelAndData md = LoadModelAndData(a->model, a->data, a->patch_spec);
-    decode::PipelineConfig cfg;
-    cfg.baseline = decode::BaselineFor(md.model, md.data.info.sample_rate_hz);
-    const decode::Pipeline<float> pipe(md.model, md.spec, cfg);
-    std::unique_ptr<ProgressBar> bar;
-    const eval::StreamPredictions pred = eval::DecodeStream(pipe, md.data, [&](std::uint64_t done, std::uint64_t total) {
-      if (!bar) bar = std::make_unique<ProgressBar>("decoding frames", total);
-      bar->Update(done);
-    });
-    if (bar) bar->Finish();
+    const eval::StreamPredictions pred = DecodeWithProgress(md.model, md.spec, md.data, "decoding frames");
     eval::WriteStreamPredictions(a->out, pred, a->model, a->data);
     const auto& c = pred.counters;
     std::printf("decoded %llu frames: %llu valid, %llu located, %llu contact onsets\n",
@@ -335,7 +290,7 @@ void RegisterDecode(CLI::App& app) {
       std::printf("  invalid (%s): %llu\n", std::string(decode::ReasonName(static_cast<decode::Reason>(r))).c_str(),
                   static_cast<unsigned long long>(c.invalid[r]));
     }
-    if (!pipe.calibrated_uncertainty()) {
+    if (!md.model.has_uncertainty()) {
       spdlog::warn("{}: the model has no calibrated uncertainty (run `ruffini calibrate`): force_sd_n and pos_cov_mm2 are NaN", a->model);
     }
     std::printf("wrote %s\n", a->out.c_str());

@@ -15,7 +15,7 @@
 #include "ruffini/dataset/dataset.h"
 #include "ruffini/error.h"
 #include "ruffini/sim/scenario.h"
-#include "ruffini/sim/server.h"
+#include "server.h"
 #include "ruffini/sim/source.h"
 #include "ruffini/twin/scene.h"
 

@@ -6,7 +6,7 @@
 
 #include "ruffini/error.h"
 #include "ruffini/ingest/hyperion.h"
-#include "ruffini/sim/server.h"
+#include "ruffini/sim/command.h"
 #include "ruffini/sim/source.h"
 
 namespace {

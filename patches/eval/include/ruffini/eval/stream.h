@@ -14,6 +14,7 @@
 #include "ruffini/decode/pipeline.h"
 #include "ruffini/patch/spec.h"
 #include "ruffini/stats.h"
+#include "ruffini/v1/model.pb.h"
 
 namespace ruffini::eval {
 
@@ -83,5 +84,15 @@ std::string StreamMetricsHeader();
 std::string StreamMetricsRow(const std::string& name, const StreamMetrics& m);
 // The per-force-bin table (miss rate, false contacts, errors).
 std::string ForceBinTable(const StreamMetrics& m);
+
+struct StreamReportRow {
+  std::string label;       // Markdown, e.g. "`paper_seed3.h5`" or "cast1 (`cast1_test.h5`)"
+  StreamMetrics scored;
+};
+// The report's "scored as a skeptical reviewer would" section: the rows (the first is the main data), the
+// main data's whole stream (false contacts, baseline, invalid frames by reason), its per-force-bin table and
+// the uncertainty's coverage against its targets (uncertainty = nullptr: the model has none).
+std::string StreamReportSection(const std::vector<StreamReportRow>& rows, const StreamMetrics& whole, bool training_data,
+                                const v1::Uncertainty* uncertainty);
 
 }  // namespace ruffini::eval

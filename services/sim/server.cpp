@@ -1,4 +1,4 @@
-#include "ruffini/sim/server.h"
+#include "server.h"
 
 #include <spdlog/spdlog.h>
 
@@ -19,59 +19,6 @@ namespace ruffini::sim {
 namespace asio = boost::asio;
 using asio::ip::tcp;
 using Buffer = std::shared_ptr<const std::vector<std::uint8_t>>;
-
-// --- Commands ----------------------------------------------------------------------------------------------
-
-namespace {
-
-std::vector<std::uint8_t> Ok(std::span<const std::uint8_t> content, std::string_view message = {}) {
-  ingest::Reply r;
-  r.message = message;
-  r.content = content;
-  return ingest::EncodeReply(r);
-}
-std::vector<std::uint8_t> OkText(std::string_view text) {
-  return Ok(std::span(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
-}
-std::vector<std::uint8_t> Error(std::string_view message) {
-  ingest::Reply r;
-  r.status = 1;
-  r.message = message;
-  return ingest::EncodeReply(r);
-}
-
-}  // namespace
-
-std::vector<std::uint8_t> AnswerCommand(const ingest::Command& command, CommandState& state) {
-  const std::string_view c = command.command;
-  if (c == "#GetSerialNumber") return OkText(state.serial_number);
-  if (c == "#GetFirmwareVersion") return OkText(state.firmware_version);
-  if (c == "#isready") {
-    const std::array<std::uint8_t, 1> ready{1};
-    return Ok(ready);
-  }
-  if (c == "#GetDutChannelCount") {
-    const auto n = static_cast<std::uint32_t>(state.channels);
-    const std::array<std::uint8_t, 4> le{static_cast<std::uint8_t>(n), static_cast<std::uint8_t>(n >> 8),
-                                         static_cast<std::uint8_t>(n >> 16), static_cast<std::uint8_t>(n >> 24)};
-    return Ok(le);
-  }
-  if (c == "#GetPeaks") {
-    if (state.last_frame.size() <= ingest::kHeaderBytes) return Error("no peaks acquired yet");
-    return Ok(std::span(state.last_frame).subspan(ingest::kHeaderBytes));
-  }
-  if (c == "#EnablePeakDataStreaming") {
-    state.streaming = true;
-    return Ok({}, "Peak data streaming enabled");
-  }
-  if (c == "#DisablePeakDataStreaming") {
-    state.streaming = false;
-    return Ok({}, "Peak data streaming disabled");
-  }
-  std::string msg = "Unknown command: ";
-  msg.append(c.substr(0, 200));
-  return Error(msg);
-}
 
 // --- Server ------------------------------------------------------------------------------------------------
 
@@ -192,7 +139,9 @@ struct SimServer::Impl {
     }
   }
 
-  static void Close(StreamClient& cl) {
+  // Stream and command clients alike: shut the socket down once.
+  template <typename Client>
+  static void Close(Client& cl) {
     if (cl.closed) return;
     cl.closed = true;
     boost::system::error_code ec;
@@ -244,13 +193,6 @@ struct SimServer::Impl {
     });
   }
 
-  static void Close(CommandClient& cl) {
-    if (cl.closed) return;
-    cl.closed = true;
-    boost::system::error_code ec;
-    cl.socket.shutdown(tcp::socket::shutdown_both, ec);
-    cl.socket.close(ec);
-  }
 
   void ReadCommand(const std::shared_ptr<CommandClient>& cl) {
     cl->socket.async_read_some(asio::buffer(cl->scratch), [this, cl](const boost::system::error_code& ec,

@@ -1,4 +1,5 @@
 #pragma once
+// The networking of ruffini-sim (a service, so it lives in services/, not patches/).
 // A simulated Hyperion interrogator on TCP (Boost.Asio, one thread): the peak stream pushes a frame to every
 // connected stream client at the sample rate, paced on absolute deadlines of a steady clock (no drift), with
 // consecutive serial numbers and Unix-ns timestamps; the command port answers the vendor's commands. All bytes
@@ -9,6 +10,7 @@
 #include <vector>
 
 #include "ruffini/ingest/hyperion.h"
+#include "ruffini/sim/command.h"
 #include "ruffini/sim/source.h"
 
 namespace ruffini::sim {
@@ -29,19 +31,6 @@ struct ServerConfig {
   std::string serial_number = "RUFFINI-SIM-0001";
   std::string firmware_version = "ruffini-sim 0.1.0";
 };
-
-// The reply to one command (a pure function of the command and the server's state; no sockets).
-struct CommandState {
-  std::size_t channels = 1;
-  bool streaming = true;
-  std::string serial_number;
-  std::string firmware_version;
-  std::vector<std::uint8_t> last_frame;  // the last encoded stream frame (header + content), may be empty
-};
-// Answers #GetSerialNumber, #GetFirmwareVersion, #isready, #GetDutChannelCount, #GetPeaks,
-// #EnablePeakDataStreaming, #DisablePeakDataStreaming (these two change state.streaming); anything else gets
-// an error reply (status 1, a message, no content).
-std::vector<std::uint8_t> AnswerCommand(const ingest::Command& command, CommandState& state);
 
 class SimServer {
  public:
