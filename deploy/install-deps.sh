@@ -13,7 +13,7 @@ packages=(
   build-essential cmake ninja-build pkg-config git
   libeigen3-dev libyaml-cpp-dev libhdf5-dev libpng-dev
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
-  libboost-dev prometheus-cpp-dev
+  libboost-dev prometheus-cpp-dev libssl-dev prometheus
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev liburdfdom-dev
   clang-14 libclang-rt-14-dev

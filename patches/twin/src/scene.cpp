@@ -147,6 +147,12 @@ Scene LoadScene(const std::string& path) {
     sp.name = p.String("name");
     sp.spec_path = (dir / p.String("spec")).lexically_normal().string();
     if (!std::filesystem::exists(sp.spec_path)) p.Fail("spec", "names a file that does not exist (" + sp.spec_path + ")");
+    if (p.Has("model")) {
+      sp.model_path = (dir / p.String("model")).lexically_normal().string();
+      if (!std::filesystem::exists(sp.model_path)) {
+        p.Fail("model", "names a file that does not exist (" + sp.model_path + ")");
+      }
+    }
     p.Finish();
     sp.spec = patch::LoadPatchSpec(sp.spec_path);
     for (const auto& other : s.patches) {

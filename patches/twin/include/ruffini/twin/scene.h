@@ -15,6 +15,9 @@ struct ScenePatch {
   std::string name;
   std::string spec_path;
   patch::PatchSpec spec;
+  // The decoder model the patch's decoder service runs (`model:`, relative to the scene file; optional:
+  // empty when the scene names none). The twin never reads it.
+  std::string model_path;
 };
 
 // The indentation rig's force sensor (the paper's ATI Nano-43: 1/256 N resolution).

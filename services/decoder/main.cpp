@@ -1,0 +1,78 @@
+// ruffini-decoder: one fibre, one service (service.h). Exit codes as the other tools: 0 ok (stopped by SIGINT
+// or SIGTERM), 1 bad input (the message names what is wrong), 2 usage. stdout carries one line, the metrics
+// port ("ports: metrics P"); logs go to stderr.
+#include <signal.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <exception>
+#include <string>
+
+#include "ruffini/error.h"
+#include "service.h"
+
+int main(int argc, char** argv) {
+  spdlog::set_default_logger(spdlog::stderr_color_mt("ruffini-decoder"));
+  CLI::App app{"ruffini-decoder: decodes one patch's interrogator stream and streams contacts to the aggregator"};
+  ruffini::decoder::ServiceConfig config;
+  std::string interrogator, aggregator, metrics = "127.0.0.1:9464", ports_file;
+  app.add_option("--scene", config.scene_path, "Scene YAML (names the patch, its spec and its model)")
+      ->required()->check(CLI::ExistingFile);
+  app.add_option("--patch", config.patch, "The scene's patch this decoder serves (default: the only one)");
+  app.add_option("--interrogator", interrogator, "The interrogator's peak-stream port, HOST:PORT")->required();
+  app.add_option("--channel", config.channel, "Interrogator channel of the fibre (default: the patch's place in the scene)")
+      ->check(CLI::Range(0, 15));
+  app.add_option("--aggregator", aggregator, "The aggregator's gRPC address, HOST:PORT")->required();
+  app.add_option("--metrics", metrics, "Where to serve Prometheus metrics, HOST:PORT (port 0: pick a free one)")
+      ->capture_default_str();
+  app.add_option("--model", config.model_path, "Decoder model file (default: the scene's `model:` for the patch)");
+  app.add_option("--decoder", config.decoder,
+                 "Decoder configuration: paper-float, paper-double, or one grid, <GRID>-float / <GRID>-double "
+                 "(docs/bench has each one's cost and error)")
+      ->capture_default_str();
+  app.add_option("--rate-hz", config.rate_hz, "The interrogator's frame rate, Hz")->capture_default_str();
+  app.add_option("--heartbeat-ms", config.heartbeat_ms, "Heartbeat period to the aggregator, ms")->capture_default_str();
+  app.add_option("--silence-ms", config.silence_ms,
+                 "Interrogator silence before a fault, ms (default: 3 frame periods)");
+  app.add_option("--reject-fault-frames", config.reject_fault_frames,
+                 "Frames rejected in a row before a fault (default: 20 ms of frames, at least 3)");
+  app.add_option("--ports-file", ports_file, "Write the chosen metrics port here ('metrics P')");
+  CLI11_PARSE(app, argc, argv);
+
+  // Block the stop signals in every thread; main waits for them with sigwait.
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGINT);
+  sigaddset(&stop_signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+
+  try {
+    config.interrogator = ruffini::service::ParseHostPort(interrogator, "--interrogator");
+    config.aggregator = ruffini::service::ParseHostPort(aggregator, "--aggregator");
+    config.metrics = ruffini::service::ParseHostPort(metrics, "--metrics", /*allow_zero=*/true);
+    ruffini::decoder::DecoderService service(config);
+    spdlog::info("{}", service.Describe());
+    spdlog::warn("the aggregator link is plaintext (no TLS yet)");
+    std::printf("ports: metrics %u\n", static_cast<unsigned>(service.metrics_port()));
+    std::fflush(stdout);
+    if (!ports_file.empty()) {
+      ruffini::service::WriteFileAtomically(ports_file, "metrics " + std::to_string(service.metrics_port()) + "\n");
+    }
+    service.Start();
+    int sig = 0;
+    sigwait(&stop_signals, &sig);
+    spdlog::info("signal {}: stopping", sig);
+    service.Stop();
+    spdlog::info("stopped");
+    return 0;
+  } catch (const ruffini::InputError& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    spdlog::error("unexpected error: {}", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,63 @@
+#pragma once
+// ruffini-decoder: one fibre, one service. Three threads and two lock-free rings (DESIGN.md, "Threads and
+// time"):
+//
+//   ingest (Boost.Asio): TCP to the interrogator's peak stream, reconnect with backoff, the Hyperion codec
+//     (parse, pick the patch's channel) -> ring A (frames and connection events; 8192 slots)
+//   decode (real time): ring A -> link::Monitor (decode::Pipeline, health, faults, heartbeats) -> ring B
+//     (messages; 2048 slots). Never waits on either side; allocates nothing per frame.
+//   publish (gRPC): ring B -> ruffini.v1.PatchMessage -> Aggregator.Connect, reconnect with backoff.
+//
+// When ring A is full the ingest thread drops the frame and counts it (the decode thread then reports an
+// overload fault). When ring B is full, heartbeats and mid-contact frames are dropped and counted (the next
+// heartbeat carries fresh health anyway), while onsets, releases and faults wait in a bounded overflow on
+// the decode thread and go first once there is room. A message made before the current aggregator stream
+// began is never sent on it (no stale contacts after a reconnect).
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "ruffini/link/monitor.h"
+#include "ruffini/service/common.h"
+
+namespace ruffini::decoder {
+
+struct ServiceConfig {
+  std::string scene_path;
+  std::string patch;                 // the scene's patch name ("" : the only one)
+  service::HostPort interrogator;    // the peak-stream port
+  int channel = -1;                  // -1: the patch's index in the scene
+  service::HostPort aggregator;
+  service::HostPort metrics;         // port 0: pick a free one
+  std::string model_path;            // "": the scene's `model:` for the patch
+  std::string decoder = "paper-float";
+  double rate_hz = 1000.0;           // the interrogator's frame rate
+  double heartbeat_ms = 10.0;
+  double silence_ms = 0.0;           // 0: 3 frame periods
+  int reject_fault_frames = 0;       // 0: 20 ms of frames (at least 3)
+  bool allow_missing = true;         // a dark grating (15 peaks) is a missing peak, not a rejected frame
+};
+
+class DecoderService {
+ public:
+  // Loads and checks everything (scene, patch, model against the patch, decoder choice, addresses) and binds
+  // the metrics port. Throws InputError with a message naming what is wrong.
+  explicit DecoderService(ServiceConfig config);
+  ~DecoderService();
+  DecoderService(const DecoderService&) = delete;
+  DecoderService& operator=(const DecoderService&) = delete;
+
+  void Start();
+  // Sends the shutting_down fault, closes both links and joins the threads (a few hundred ms at most).
+  void Stop();
+
+  [[nodiscard]] std::uint16_t metrics_port() const noexcept;
+  // One line: patch, model, decoder choice, rate, addresses.
+  [[nodiscard]] std::string Describe() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ruffini::decoder
