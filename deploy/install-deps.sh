@@ -15,7 +15,7 @@ packages=(
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   libboost-dev prometheus-cpp-dev libssl-dev prometheus
   libgtest-dev libgmock-dev libbenchmark-dev
-  libcli11-dev libspdlog-dev liburdfdom-dev
+  libcli11-dev libspdlog-dev liburdfdom-dev liburdfdom-tools liborocos-kdl-dev
   clang-14 libclang-rt-14-dev
 )
 if [[ "${1:-}" != "--no-training" ]]; then
