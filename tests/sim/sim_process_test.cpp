@@ -1,14 +1,11 @@
 // The real ruffini-sim process on 127.0.0.1 (port 0, --ports-file), read by plain POSIX sockets and the
-// ingest codec. Every wait is a condition with a deadline; the sim is always stopped by pid (SIGTERM, then
-// SIGKILL after a timeout) and reaped.
+// ingest codec. Every wait is a condition with a deadline; the sim is started, always stopped by pid (SIGTERM,
+// then SIGKILL after a timeout) and reaped by ruffini::testing::Process (tests/common/process.h).
 #include <arpa/inet.h>
-#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
-#include <signal.h>
 #include <sys/socket.h>
 #include <sys/time.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -18,9 +15,9 @@
 #include <fstream>
 #include <optional>
 #include <string>
-#include <thread>
 #include <vector>
 
+#include "../common/process.h"
 #include "ruffini/dataset/dataset.h"
 #include "ruffini/ingest/hyperion.h"
 
@@ -29,6 +26,7 @@ namespace {
 using namespace ruffini;
 using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
+namespace rt = ruffini::testing;
 
 constexpr std::size_t kRows = 37;
 
@@ -51,89 +49,79 @@ std::string MakeDataset(const std::string& dir) {
   return path;
 }
 
+struct Ports {
+  std::uint16_t command = 0;
+  std::uint16_t stream = 0;
+};
+
+// The sim's --ports-file ("command P" and "stream P" lines), or nullopt while it is missing or incomplete (the
+// sim writes it under a temporary name and renames it, so a complete file is the whole story).
+std::optional<Ports> ReadPortsFile(const std::string& path) {
+  std::ifstream in(path);
+  std::string k1, k2;
+  unsigned c = 0, s = 0;
+  if (!(in >> k1 >> c >> k2 >> s) || k1 != "command" || k2 != "stream" || c == 0 || s == 0 || c > 65535 ||
+      s > 65535) {
+    return std::nullopt;
+  }
+  return Ports{static_cast<std::uint16_t>(c), static_cast<std::uint16_t>(s)};
+}
+
+std::string SceneArg() { return std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/forearm.yaml"; }
+
 class Sim {
  public:
   // Starts ruffini-sim with the given extra arguments; waits (10 s at most) for its ports file.
   // source: {} replays a dataset written here; else the arguments that name the source (e.g. --scenario F).
   explicit Sim(const std::string& name, std::vector<std::string> extra = {}, std::vector<std::string> source = {}) {
-    dir_ = (fs::current_path() / ("sim_" + name)).string();
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    if (source.empty()) source = {"--replay", MakeDataset(dir_)};
-    ports_file_ = dir_ + "/ports";
-    std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", std::string(RUFFINI_SOURCE_DIR) +
-                                     "/config/scenes/forearm.yaml", source[0], source[1], "--rate-hz", "1000",
-                                     "--host", "127.0.0.1", "--command-port", "0", "--stream-port", "0",
-                                     "--ports-file", ports_file_};
+    const std::string dir = (fs::current_path() / ("sim_" + name)).string();
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    if (source.empty()) source = {"--replay", MakeDataset(dir)};
+    const std::string ports_file = dir + "/ports";
+    std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", SceneArg(), source[0], source[1], "--rate-hz",
+                                     "1000", "--host", "127.0.0.1", "--command-port", "0", "--stream-port", "0",
+                                     "--ports-file", ports_file};
     args.insert(args.end(), extra.begin(), extra.end());
-    const std::string out = dir_ + "/stdout", err = dir_ + "/stderr";
-    pid_ = fork();
-    if (pid_ == 0) {
-      const int o = open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      dup2(o, 1);
-      dup2(e, 2);
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      execv(argv[0], argv.data());
-      _exit(127);
+    process_ = rt::Process(std::move(args), dir);
+    std::optional<Ports> ports;
+    const bool up = rt::WaitFor(
+        [&] {
+          ports = ReadPortsFile(ports_file);
+          return ports.has_value() || !process_.Running();
+        },
+        std::chrono::seconds(10));
+    if (ports) {
+      command_port_ = ports->command;
+      stream_port_ = ports->stream;
+    } else if (up) {
+      ADD_FAILURE() << "ruffini-sim exited early: " << process_.stderr_text();
+    } else {
+      ADD_FAILURE() << "no ports file within 10 s";
     }
-    const auto deadline = Clock::now() + std::chrono::seconds(10);
-    while (Clock::now() < deadline) {
-      std::ifstream in(ports_file_);
-      std::string k1, k2;
-      unsigned c = 0, s = 0;
-      if (in >> k1 >> c >> k2 >> s && k1 == "command" && k2 == "stream") {
-        command_port_ = static_cast<std::uint16_t>(c);
-        stream_port_ = static_cast<std::uint16_t>(s);
-        return;
-      }
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        ADD_FAILURE() << "ruffini-sim exited early: " << Slurp(err);
-        return;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    ADD_FAILURE() << "no ports file within 10 s";
   }
-  ~Sim() { Stop(); }
 
   // SIGTERM, then SIGKILL after 5 s; returns the exit status (or -1).
   int Stop() {
-    if (pid_ <= 0) return exit_status_;
-    kill(pid_, SIGTERM);
-    const auto deadline = Clock::now() + std::chrono::seconds(5);
-    int status = 0;
-    for (;;) {
-      if (waitpid(pid_, &status, WNOHANG) == pid_) break;
-      if (Clock::now() > deadline) {
-        kill(pid_, SIGKILL);
-        waitpid(pid_, &status, 0);
-        ADD_FAILURE() << "ruffini-sim ignored SIGTERM for 5 s";
-        break;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const int status = process_.Stop();
+    if (process_.killed() && !kill_reported_) {
+      kill_reported_ = true;
+      ADD_FAILURE() << "ruffini-sim ignored SIGTERM for 5 s";
     }
-    pid_ = -1;
-    exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return exit_status_;
+    return status;
   }
+  ~Sim() { Stop(); }
+  Sim(const Sim&) = delete;
+  Sim& operator=(const Sim&) = delete;
 
-  static std::string Slurp(const std::string& path) {
-    std::ifstream in(path);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  }
-  [[nodiscard]] std::string stdout_text() const { return Slurp(dir_ + "/stdout"); }
-  [[nodiscard]] bool ok() const { return pid_ > 0 && stream_port_ != 0; }
+  [[nodiscard]] std::string stdout_text() const { return process_.stdout_text(); }
+  [[nodiscard]] std::string stderr_text() const { return process_.stderr_text(); }
+  [[nodiscard]] bool ok() { return process_.Running() && stream_port_ != 0; }
   std::uint16_t command_port_ = 0, stream_port_ = 0;
 
  private:
-  std::string dir_, ports_file_;
-  pid_t pid_ = -1;
-  int exit_status_ = -1;
+  rt::Process process_;
+  bool kill_reported_ = false;
 };
 
 // A loopback TCP connection with a 5 s receive timeout.
@@ -364,35 +352,14 @@ TEST(SimProcess, APortInUseIsAnInputError) {
   ASSERT_TRUE(first.ok());
   const std::string dir = (fs::current_path() / "sim_port_clash").string();
   fs::create_directories(dir);
-  const std::string err = dir + "/stderr";
-  std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", std::string(RUFFINI_SOURCE_DIR) +
-                                   "/config/scenes/forearm.yaml", "--replay", MakeDataset(dir),
+  std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", SceneArg(), "--replay", MakeDataset(dir),
                                    "--command-port", std::to_string(first.command_port_), "--stream-port", "0"};
-  const pid_t pid = fork();
-  if (pid == 0) {
-    const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    dup2(e, 2);
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  const auto deadline = Clock::now() + std::chrono::seconds(10);
-  while (waitpid(pid, &status, WNOHANG) != pid) {
-    if (Clock::now() > deadline) {
-      kill(pid, SIGKILL);
-      waitpid(pid, &status, 0);
-      FAIL() << "the second ruffini-sim did not exit";
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 1);
-  EXPECT_NE(Sim::Slurp(err).find("--command-port: cannot listen on 127.0.0.1:" + std::to_string(first.command_port_)),
+  rt::Process second(std::move(args), dir);
+  EXPECT_EQ(second.WaitExit(std::chrono::seconds(10)), 1) << "the second ruffini-sim did not exit with 1";
+  EXPECT_NE(second.stderr_text().find("--command-port: cannot listen on 127.0.0.1:" +
+                                      std::to_string(first.command_port_)),
             std::string::npos)
-      << Sim::Slurp(err);
+      << second.stderr_text();
   EXPECT_EQ(first.Stop(), 0);
 }
 
