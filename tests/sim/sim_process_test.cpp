@@ -8,12 +8,14 @@
 #include <sys/time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -156,21 +158,31 @@ class Conn {
 struct Received {
   std::vector<std::uint64_t> serials;
   std::vector<std::int64_t> timestamps_ns;
+  std::vector<std::int64_t> arrival_unix_ns;  // system_clock right after the recv that completed the frame
+  std::vector<std::uint8_t> buffer_available;
+  std::vector<std::uint16_t> count0;          // channel 0's peak count
+  std::vector<std::uint32_t> flags;
   std::vector<Wavelengths> channel0;
   std::vector<ingest::Reason> rejected;
+  std::optional<ingest::Reason> framing_error;  // the decoder needs a resync
   bool closed = false;
   ingest::Counters counters;
 };
 
-// Reads until at least `frames` frames and rejections in all (whole reads: it may return a few more), the
-// peer closes, or 10 s pass.
-Received ReadFrames(Conn& c, std::size_t frames) {
+std::int64_t UnixNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// Reads until at least `frames` frames and rejections in all (whole reads: it may return a few more), a
+// framing error (a test failure unless framing_ok), the peer closes, or 10 s pass.
+Received ReadFrames(Conn& c, std::size_t frames, ingest::StreamDecoder& decoder, bool framing_ok = false) {
   Received r;
-  ingest::StreamDecoder decoder;
   std::vector<std::uint8_t> buf(65536);
   const auto deadline = Clock::now() + std::chrono::seconds(10);
   while (r.serials.size() + r.rejected.size() < frames && Clock::now() < deadline) {
     const ssize_t n = c.Read(buf.data(), buf.size());
+    const std::int64_t arrival_ns = UnixNowNs();
     if (n == 0) {
       r.closed = true;
       break;
@@ -181,13 +193,19 @@ Received ReadFrames(Conn& c, std::size_t frames) {
       const auto res = decoder.Feed(rest);
       rest = rest.subspan(res.consumed);
       if (res.status == ingest::StreamDecoder::Status::kFrame) {
-        r.serials.push_back(decoder.frame().serial_number);
-        r.timestamps_ns.push_back(decoder.frame().timestamp_ns);
+        const auto& f = decoder.frame();
+        r.serials.push_back(f.serial_number);
+        r.timestamps_ns.push_back(f.timestamp_ns);
+        r.arrival_unix_ns.push_back(arrival_ns);
+        r.buffer_available.push_back(f.buffer_available);
+        r.count0.push_back(f.count[0]);
+        r.flags.push_back(decoder.flags());
         r.channel0.push_back(decoder.wavelength_nm());
       } else if (res.status == ingest::StreamDecoder::Status::kRejected) {
         r.rejected.push_back(res.reason);
       } else if (res.status == ingest::StreamDecoder::Status::kNeedsResync) {
-        ADD_FAILURE() << "framing error: " << ingest::ReasonName(res.reason);
+        if (!framing_ok) ADD_FAILURE() << "framing error: " << ingest::ReasonName(res.reason);
+        r.framing_error = res.reason;
         r.counters = decoder.counters();
         return r;
       }
@@ -195,6 +213,21 @@ Received ReadFrames(Conn& c, std::size_t frames) {
   }
   r.counters = decoder.counters();
   return r;
+}
+
+Received ReadFrames(Conn& c, std::size_t frames) {
+  ingest::StreamDecoder decoder;
+  return ReadFrames(c, frames, decoder);
+}
+
+// A count from the sim's last "fault totals: dropped 3, nan 2, ..." log line (written at shutdown).
+std::optional<std::uint64_t> FaultTotal(const std::string& log, const std::string& name) {
+  const auto line = log.rfind("fault totals:");
+  if (line == std::string::npos) return std::nullopt;
+  std::smatch m;
+  const std::string rest = log.substr(line, log.find('\n', line) - line);
+  if (!std::regex_search(rest, m, std::regex("[:,] " + name + " ([0-9]+)"))) return std::nullopt;
+  return std::stoull(m[1].str());
 }
 
 // Sends a command and reads its reply. `reply` views the returned buffer: keep it while reading `reply`.
@@ -258,6 +291,11 @@ TEST(SimProcess, StreamsTheReplayedDatasetWithConsecutiveSerialsToSeveralClients
   // Each sample is stamped with its own time: exactly 1 ms apart at 1 kHz (1 ns of rounding).
   for (std::size_t i = 1; i < ra.timestamps_ns.size(); ++i) {
     ASSERT_NEAR(double(ra.timestamps_ns[i] - ra.timestamps_ns[i - 1]), 1e6, 1.0) << i;
+  }
+  // The timestamp is the scheduled send time, so no frame arrives before it (same host, same Unix clock; 1 ms
+  // of slack for a clock adjustment during the test).
+  for (std::size_t i = 0; i < ra.timestamps_ns.size(); ++i) {
+    ASSERT_GE(ra.arrival_unix_ns[i] - ra.timestamps_ns[i], -1'000'000) << i;
   }
   EXPECT_EQ(sim.Stop(), 0);  // SIGTERM: a clean exit
 }
@@ -345,6 +383,121 @@ TEST(SimProcess, FaultsDropNanAndDisconnect) {
     EXPECT_NE((s + 1) % 7, 0u) << s;   // NaN samples are rejected by the decoder
   }
   EXPECT_EQ(sim.Stop(), 0);
+  // Counted and logged by the sim (totals at shutdown).
+  const std::string log = sim.stderr_text();
+  EXPECT_GT(FaultTotal(log, "dropped").value_or(0), 0u) << log;
+  EXPECT_GT(FaultTotal(log, "nan").value_or(0), 0u) << log;
+  EXPECT_EQ(FaultTotal(log, "disconnected"), 1u) << log;
+  EXPECT_EQ(FaultTotal(log, "missing"), 0u) << log;
+}
+
+TEST(SimProcess, MissingEveryLeavesOneRotatingGratingOutOfChannel0) {
+  Sim sim("missing", {"--missing-every", "5"});
+  ASSERT_TRUE(sim.ok());
+  // A client that allows missing peaks (bands around the dataset's gratings) sees which one went dark; a strict
+  // client (the default) refuses those frames as wrong_peak_count.
+  Wavelengths centre_nm{};
+  for (std::size_t g = 0; g < kGratings; ++g) centre_nm[g] = RowNm(0, g);
+  ingest::DecoderConfig tolerant_config;
+  tolerant_config.pick = ingest::NearestGratingBands(0, centre_nm);
+  tolerant_config.pick->allow_missing = true;
+  ingest::StreamDecoder tolerant(tolerant_config);
+  Conn a(sim.stream_port_), b(sim.stream_port_);
+  ASSERT_TRUE(a.connected());
+  ASSERT_TRUE(b.connected());
+  const auto r = ReadFrames(a, 300, tolerant);
+  const auto strict = ReadFrames(b, 100);
+  ASSERT_GE(r.serials.size(), 300u);
+  EXPECT_TRUE(r.rejected.empty());
+  std::vector<bool> dark_seen(kGratings, false);
+  for (std::size_t i = 0; i < r.serials.size(); ++i) {
+    const std::uint64_t s = r.serials[i];
+    if (i > 0) {
+      ASSERT_EQ(s, r.serials[i - 1] + 1) << i;
+    }
+    const bool missing = (s + 1) % 5 == 0;
+    const std::size_t dark = missing ? std::size_t(((s + 1) / 5 - 1) % kGratings) : kGratings;
+    ASSERT_EQ(r.count0[i], missing ? 15 : 16) << s;
+    ASSERT_EQ((r.flags[i] & kFlagPeakMissing) != 0, missing) << s;
+    for (std::size_t g = 0; g < kGratings; ++g) {
+      if (g == dark) {
+        ASSERT_TRUE(std::isnan(r.channel0[i][g])) << s << " " << g;
+      } else {
+        ASSERT_EQ(r.channel0[i][g], RowNm(std::size_t(s % kRows), g)) << s << " " << g;
+      }
+    }
+    if (missing) dark_seen[dark] = true;
+  }
+  EXPECT_EQ(std::count(dark_seen.begin(), dark_seen.end(), true), std::ptrdiff_t(kGratings));  // it rotates
+  ASSERT_FALSE(strict.rejected.empty());
+  for (auto reason : strict.rejected) EXPECT_EQ(reason, ingest::Reason::kWrongPeakCount);
+  for (auto s : strict.serials) EXPECT_NE((s + 1) % 5, 0u) << s;
+  EXPECT_EQ(sim.Stop(), 0);
+  const std::string log = sim.stderr_text();
+  EXPECT_GE(FaultTotal(log, "missing").value_or(0), 60u) << log;
+}
+
+TEST(SimProcess, GarbageEveryIsAFramingErrorAndAReconnectResyncs) {
+  Sim sim("garbage", {"--garbage-every", "200"});
+  ASSERT_TRUE(sim.ok());
+  ingest::StreamDecoder decoder;
+  Conn a(sim.stream_port_);
+  ASSERT_TRUE(a.connected());
+  const auto r = ReadFrames(a, 1000, decoder, /*framing_ok=*/true);
+  // The 16 bytes before sample 199's frame (or 399's, ...) announce a 0xDEADBEEF-byte content.
+  ASSERT_EQ(r.framing_error, ingest::Reason::kContentTooLong);
+  EXPECT_TRUE(decoder.needs_resync());
+  EXPECT_EQ(r.counters.resyncs, 1u);
+  ASSERT_FALSE(r.serials.empty());
+  for (std::size_t i = 1; i < r.serials.size(); ++i) ASSERT_EQ(r.serials[i], r.serials[i - 1] + 1) << i;
+  EXPECT_EQ((r.serials.back() + 2) % 200, 0u) << r.serials.back();  // the frame before the garbage arrived
+  // The sim keeps serving: a new connection starts on a frame boundary; Reset() keeps the last serial, so the
+  // samples missed while reconnecting count as lost.
+  decoder.Reset();
+  Conn b(sim.stream_port_);
+  ASSERT_TRUE(b.connected());
+  const auto again = ReadFrames(b, 20, decoder, /*framing_ok=*/true);
+  ASSERT_FALSE(again.serials.empty());
+  EXPECT_GT(again.serials.front(), r.serials.back() + 1);
+  EXPECT_GE(again.counters.lost_samples, again.serials.front() - r.serials.back() - 1);
+  EXPECT_EQ(sim.Stop(), 0);
+  const std::string log = sim.stderr_text();
+  EXPECT_GE(FaultTotal(log, "garbage").value_or(0), 1u) << log;
+}
+
+TEST(SimProcess, StallHoldsSamplesThenSendsThemLateInOneBurst) {
+  // Samples 0..299 go out on time; 300..549 (250 ms at 1 kHz) are held; at sample 550's deadline the held ones
+  // go out in one burst, then 550 and on; the next stall starts at 850.
+  Sim sim("stall", {"--stall-after", "300", "--stall-ms", "250"});
+  ASSERT_TRUE(sim.ok());
+  Conn c(sim.stream_port_);
+  ASSERT_TRUE(c.connected());
+  const auto r = ReadFrames(c, 600);
+  ASSERT_GE(r.serials.size(), 600u);
+  ASSERT_LT(r.serials.front(), 300u) << "connected after the stall began";
+  EXPECT_EQ(r.counters.lost_samples, 0u);  // nothing lost: held, not dropped
+  std::size_t first_held = r.serials.size();
+  for (std::size_t i = 0; i < r.serials.size(); ++i) {
+    const std::uint64_t s = r.serials[i];
+    if (i > 0) {
+      ASSERT_EQ(s, r.serials[i - 1] + 1) << i;
+      ASSERT_NEAR(double(r.timestamps_ns[i] - r.timestamps_ns[i - 1]), 1e6, 1.0) << i;  // stamped on schedule
+    }
+    const bool held = s >= 300 && s < 550;
+    // The simulated instrument buffers 2 s (2000 samples); each held sample fills it by 1/2000.
+    const int expected = held ? 100 - int((100 * (s - 300 + 1) + 1999) / 2000) : 100;
+    ASSERT_EQ(int(r.buffer_available[i]), expected) << s;
+    if (s == 300) first_held = i;
+  }
+  ASSERT_LT(first_held, r.serials.size());
+  ASSERT_GE(r.serials.back(), 550u);  // frames resume after the burst
+  // TCP keeps order and nothing else is sent, so no byte after sample 299's frame arrives before the stall
+  // ends: sample 300 arrives at least 250 ms after its timestamp (same host, same Unix clock; 1 ms of slack).
+  EXPECT_GE(r.arrival_unix_ns[first_held] - r.timestamps_ns[first_held], 249'000'000);
+  EXPECT_EQ(sim.Stop(), 0);
+  const std::string log = sim.stderr_text();
+  EXPECT_GE(FaultTotal(log, "stalls").value_or(0), 1u) << log;
+  EXPECT_GE(FaultTotal(log, "sent_late").value_or(0), 250u) << log;
 }
 
 TEST(SimProcess, APortInUseIsAnInputError) {
