@@ -64,8 +64,8 @@ class WriteLag {
     }
     return "inf";
   }
-  static constexpr std::array<std::int64_t, 13> kBoundsUs = {1,   2,   5,    10,   20,   50,    100,
-                                                             200, 500, 1000, 2000, 5000, 10000};
+  static constexpr std::array<std::int64_t, 18> kBoundsUs = {1,   2,   5,   10,   15,   20,   30,   40,    50,
+                                                             75,  100, 200, 500, 1000, 2000, 5000, 10000, 100000};
   std::array<std::uint64_t, kBoundsUs.size() + 1> buckets_{};
   std::uint64_t count_ = 0;
   std::int64_t sum_ns_ = 0;
