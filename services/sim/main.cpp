@@ -55,8 +55,19 @@ int main(int argc, char** argv) {
   app.add_option("--host", config.host, "Address to listen on")->default_val("127.0.0.1");
   app.add_option("--drop-every", config.faults.drop_every, "Fault: skip every N-th sample (serial gaps)");
   app.add_option("--nan-every", config.faults.nan_every, "Fault: a NaN peak on channel 0 every N-th sample");
+  app.add_option("--missing-every", config.faults.missing_every,
+                 "Fault: every N-th sample leaves one grating out of channel 0 (15 peaks; the grating rotates)");
+  app.add_option("--garbage-every", config.faults.garbage_every,
+                 "Fault: 16 garbage bytes (a header with content_length 0xDEADBEEF) before every N-th sample's frame");
   app.add_option("--disconnect-after", config.faults.disconnect_after,
                  "Fault: disconnect each stream client after N frames");
+  auto* stall_after = app.add_option("--stall-after", config.faults.stall_after,
+                                     "Fault: after N samples sent, stall the stream for --stall-ms (held samples go "
+                                     "out late in one burst); repeats every N samples");
+  auto* stall_ms = app.add_option("--stall-ms", config.faults.stall_ms, "Fault: how long each stall lasts, ms")
+                       ->check(CLI::Range(1u, ruffini::sim::kMaxStallMs));
+  stall_after->needs(stall_ms);
+  stall_ms->needs(stall_after);
   try {
     app.parse(argc, argv);
     if (replay_path.empty() && scenario_path.empty()) throw CLI::RequiredError("--scenario or --replay");

@@ -2,12 +2,14 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <array>
 #include <boost/asio.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <deque>
+#include <iterator>
 #include <limits>
 #include <list>
 #include <utility>
@@ -20,13 +22,77 @@ namespace asio = boost::asio;
 using asio::ip::tcp;
 using Buffer = std::shared_ptr<const std::vector<std::uint8_t>>;
 
+namespace {
+
+std::int64_t UnixNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// True for the fault's samples: every N-th, i.e. serial k with (k + 1) mod N = 0 (never when N = 0).
+constexpr bool Every(std::uint64_t n, std::uint64_t k) noexcept { return n != 0 && (k + 1) % n == 0; }
+
+// How late a frame's write starts after its timestamp (system_clock at the write minus t_ns), in fixed
+// buckets: no allocation, one clock read per write.
+class WriteLag {
+ public:
+  void Add(std::int64_t lag_ns) noexcept {
+    ++count_;
+    sum_ns_ += lag_ns;
+    min_ns_ = std::min(min_ns_, lag_ns);
+    max_ns_ = std::max(max_ns_, lag_ns);
+    std::size_t b = 0;
+    while (b < kBoundsUs.size() && lag_ns > kBoundsUs[b] * 1000) ++b;
+    ++buckets_[b];
+  }
+  void Log() const {
+    if (count_ == 0) return;
+    spdlog::info("write lag (system_clock at the write minus the frame's t_ns, {} writes on time): min {:.1f} us, "
+                 "mean {:.1f} us, p50 <= {} us, p99 <= {} us, p99.9 <= {} us, max {:.1f} us",
+                 count_, double(min_ns_) / 1e3, double(sum_ns_) / double(count_) / 1e3, Quantile(0.5),
+                 Quantile(0.99), Quantile(0.999), double(max_ns_) / 1e3);
+  }
+
+ private:
+  // The bucket bound (us) that holds quantile q; "inf" past the last bound.
+  [[nodiscard]] std::string Quantile(double q) const {
+    const auto want = static_cast<std::uint64_t>(std::ceil(q * double(count_)));
+    std::uint64_t seen = 0;
+    for (std::size_t b = 0; b < kBoundsUs.size(); ++b) {
+      seen += buckets_[b];
+      if (seen >= want) return std::to_string(kBoundsUs[b]);
+    }
+    return "inf";
+  }
+  static constexpr std::array<std::int64_t, 18> kBoundsUs = {1,   2,   5,   10,   15,   20,   30,   40,    50,
+                                                             75,  100, 200, 500, 1000, 2000, 5000, 10000, 100000};
+  std::array<std::uint64_t, kBoundsUs.size() + 1> buckets_{};
+  std::uint64_t count_ = 0;
+  std::int64_t sum_ns_ = 0;
+  std::int64_t min_ns_ = std::numeric_limits<std::int64_t>::max();
+  std::int64_t max_ns_ = std::numeric_limits<std::int64_t>::min();
+};
+
+}  // namespace
+
 // --- Server ------------------------------------------------------------------------------------------------
 
 struct SimServer::Impl {
+  // One write to stream clients: a frame, or a fault's garbage.
+  struct Outgoing {
+    Buffer bytes;
+    std::int64_t t_ns = -1;  // the frame's timestamp; -1: not a frame (garbage)
+    bool late = false;       // held by a stall and sent in its burst (left out of the write-lag figures)
+  };
+  // Injected faults so far.
+  struct FaultCounts {
+    std::uint64_t dropped = 0, nan = 0, missing = 0, garbage = 0, disconnected = 0, stalls = 0, sent_late = 0;
+    bool operator==(const FaultCounts&) const = default;
+  };
   struct StreamClient : std::enable_shared_from_this<StreamClient> {
     explicit StreamClient(tcp::socket s) : socket(std::move(s)) {}
     tcp::socket socket;
-    std::deque<Buffer> queue;
+    std::deque<Outgoing> queue;
     std::uint64_t sent = 0;  // frames queued to this client
     bool closing = false;    // close once the queue is written
     bool closed = false;
@@ -52,6 +118,19 @@ struct SimServer::Impl {
     state.serial_number = config.serial_number;
     state.firmware_version = config.firmware_version;
     peaks.resize(source->channels());
+    const auto& f = config.faults;
+    if ((f.stall_after == 0) != (f.stall_ms == 0)) {
+      throw InputError("--stall-after (" + std::to_string(f.stall_after) + ") and --stall-ms (" +
+                       std::to_string(f.stall_ms) + ") go together: both set or both 0");
+    }
+    if (f.stall_ms > kMaxStallMs) {
+      throw InputError("--stall-ms: " + std::to_string(f.stall_ms) + " must lie in 1.." + std::to_string(kMaxStallMs));
+    }
+    // 2 s of frames behind, plus room for a stall's burst (and one garbage burst a frame at most).
+    buffer_samples = static_cast<std::uint64_t>(std::ceil(config.rate_hz * kMaxStallMs / 1000.0));
+    const auto stall_samples = static_cast<std::size_t>(std::ceil(config.rate_hz * f.stall_ms / 1000.0));
+    max_queue = (static_cast<std::size_t>(config.rate_hz) * 2 + stall_samples) * (f.garbage_every != 0 ? 2 : 1);
+    next_stall_at = f.stall_after;
     Open(command_acceptor, config.command_port, "--command-port");
     Open(stream_acceptor, config.stream_port, "--stream-port");
     bound_command_port = command_acceptor.local_endpoint().port();
@@ -83,26 +162,80 @@ struct SimServer::Impl {
     const auto now = std::chrono::steady_clock::now();
     // Catch up on missed deadlines, a bounded number per wake-up so the command port stays served.
     for (int i = 0; i < 64 && Deadline(next_sample) <= now; ++i) Emit(next_sample++);
+    if (next_sample >= next_summary) {  // at most one fault summary a second of samples, and only on news
+      next_summary = next_sample + static_cast<std::uint64_t>(config.rate_hz);
+      if (!(counts == logged_counts)) LogFaults("faults so far");
+    }
     timer.expires_at(Deadline(next_sample));
     timer.async_wait([this](const boost::system::error_code& ec) {
       if (!ec && !stopped) Tick();
     });
   }
 
+  // The first fault of a kind is logged at once; the rest are counted (and summarised once a second).
+  static void Count(std::uint64_t& counter, const char* what, std::uint64_t k) {
+    if (++counter == 1) spdlog::info("fault: {} (sample {}); further ones are counted", what, k);
+  }
+
+  void LogFaults(const char* what) {
+    logged_counts = counts;
+    spdlog::info("{}: dropped {}, nan {}, missing {}, garbage {}, disconnected {}, stalls {}, sent_late {}", what,
+                 counts.dropped, counts.nan, counts.missing, counts.garbage, counts.disconnected, counts.stalls,
+                 counts.sent_late);
+  }
+
+  // --stall-after / --stall-ms, before sample k is made: a stall starts at sample next_stall_at and ends at the
+  // first sample whose deadline is stall_ms after the stall's first; that sample goes out right after the held
+  // burst, and the next stall starts stall_after samples later.
+  void StallBefore(std::uint64_t k) {
+    const auto& f = config.faults;
+    if (f.stall_after == 0) return;
+    if (stalling && Deadline(k) >= stall_end) {
+      stalling = false;
+      next_stall_at = k + f.stall_after;
+      spdlog::info("fault: stall over at sample {}: {} held sample(s) go out late in one burst", k, held_frames);
+      counts.sent_late += held_frames;
+      for (auto& o : held) Broadcast(std::move(o));
+      held.clear();
+      held_frames = 0;
+    }
+    if (!stalling && k >= next_stall_at) {
+      stalling = true;
+      stall_end = Deadline(k) + std::chrono::milliseconds(f.stall_ms);
+      ++counts.stalls;
+      spdlog::info("fault: stall {} from sample {}: nothing sent for {} ms, samples held", counts.stalls, k, f.stall_ms);
+    }
+  }
+
   void Emit(std::uint64_t k) {
+    StallBefore(k);
     source->Sample(k, peaks);
     const auto& f = config.faults;
-    if (f.nan_every != 0 && (k + 1) % f.nan_every == 0) peaks[0][0] = std::numeric_limits<double>::quiet_NaN();
     ingest::PeakSample s;
     s.serial_number = k;
-    // The sample's own time (its deadline), on the Unix clock: exactly one period apart, even when a late
-    // wake-up sends several samples at once.
+    // The sample's scheduled send time (its deadline), on the Unix clock: exactly one period apart, even when a
+    // late wake-up sends several samples at once. docs/sim.md has the measured gap to the socket write.
     s.timestamp_ns = unix_start_ns + std::chrono::duration_cast<std::chrono::nanoseconds>(Deadline(k) - start).count();
+    // A held sample fills the simulated instrument's 2 s buffer.
+    if (stalling) {
+      const std::uint64_t used = (100 * (held_frames + 1) + buffer_samples - 1) / buffer_samples;
+      s.buffer_available = static_cast<std::uint8_t>(100 - std::min<std::uint64_t>(used, 100));
+    }
+    std::size_t missing_grating = kGratings;  // none
+    if (Every(f.missing_every, k)) {
+      missing_grating = static_cast<std::size_t>(((k + 1) / f.missing_every - 1) % kGratings);
+      Count(counts.missing, "a grating's peak left out of channel 0 (--missing-every)", k);
+    }
     for (std::size_t c = 0; c < peaks.size(); ++c) {
       std::size_t n = 0;
-      const bool inject = c == 0 && f.nan_every != 0 && (k + 1) % f.nan_every == 0;
-      for (const double nm : peaks[c]) {
-        if (!std::isnan(nm) || (inject && n == 0)) seen[c][n++] = nm;  // a grating it cannot see is left out
+      for (std::size_t g = 0; g < kGratings; ++g) {
+        const double nm = peaks[c][g];
+        if (!std::isnan(nm) && !(c == 0 && g == missing_grating)) seen[c][n++] = nm;  // a dark grating is left out
+      }
+      if (c == 0 && Every(f.nan_every, k)) {
+        seen[0][0] = std::numeric_limits<double>::quiet_NaN();
+        n = std::max<std::size_t>(n, 1);
+        Count(counts.nan, "a NaN as channel 0's first peak (--nan-every)", k);
       }
       s.channel_peaks_nm[c] = std::span<const double>(seen[c].data(), n);
     }
@@ -112,10 +245,33 @@ struct SimServer::Impl {
       return;
     }
     state.last_frame = *frame;
-    if (f.drop_every != 0 && (k + 1) % f.drop_every == 0) return;  // a lost sample: its serial is skipped
+    if (Every(f.drop_every, k)) {  // a lost sample: its serial is skipped
+      Count(counts.dropped, "a sample not sent (--drop-every)", k);
+      return;
+    }
     if (!state.streaming) return;
-    const Buffer shared = std::move(frame);
-    const std::size_t max_queue = static_cast<std::size_t>(config.rate_hz) * 2;  // 2 s of backlog
+    Outgoing out{std::move(frame), s.timestamp_ns, stalling};
+    if (Every(f.garbage_every, k)) {
+      Count(counts.garbage, "16 garbage bytes before the sample's frame (--garbage-every)", k);
+      Outgoing junk{garbage, -1, stalling};
+      if (stalling) {
+        held.push_back(std::move(junk));
+      } else {
+        Broadcast(std::move(junk));
+      }
+    }
+    if (stalling) {
+      held.push_back(std::move(out));
+      ++held_frames;
+      return;
+    }
+    Broadcast(std::move(out));
+  }
+
+  // Queues one write to every stream client (a frame counts towards --disconnect-after, garbage does not).
+  void Broadcast(Outgoing out) {
+    const auto& f = config.faults;
+    const bool is_frame = out.t_ns >= 0;
     for (auto it = streams.begin(); it != streams.end();) {
       auto& cl = *it;
       if (cl->closed) {
@@ -130,9 +286,13 @@ struct SimServer::Impl {
           it = streams.erase(it);
           continue;
         }
-        cl->queue.push_back(shared);
-        ++cl->sent;
-        if (f.disconnect_after != 0 && cl->sent >= f.disconnect_after) cl->closing = true;
+        cl->queue.push_back(out);
+        if (is_frame) ++cl->sent;
+        if (is_frame && f.disconnect_after != 0 && cl->sent >= f.disconnect_after) {
+          cl->closing = true;
+          ++counts.disconnected;
+          spdlog::info("fault: disconnecting a stream client after {} frames (--disconnect-after)", cl->sent);
+        }
         if (cl->queue.size() == 1) WriteStream(cl);
       }
       ++it;
@@ -150,7 +310,10 @@ struct SimServer::Impl {
   }
 
   void WriteStream(const std::shared_ptr<StreamClient>& cl) {
-    asio::async_write(cl->socket, asio::buffer(*cl->queue.front()),
+    const Outgoing& out = cl->queue.front();
+    // Measured at the write's start: with nothing else queued on the socket Asio tries the send() at once.
+    if (out.t_ns >= 0 && !out.late) write_lag.Add(UnixNowNs() - out.t_ns);
+    asio::async_write(cl->socket, asio::buffer(*out.bytes),
                       [this, cl](const boost::system::error_code& ec, std::size_t) {
                         if (cl->closed) return;
                         if (ec) {
@@ -258,6 +421,11 @@ struct SimServer::Impl {
     for (auto& cl : commands) Close(*cl);
     streams.clear();
     commands.clear();
+    const auto& f = config.faults;
+    if (f.drop_every || f.nan_every || f.missing_every || f.garbage_every || f.disconnect_after || f.stall_after) {
+      LogFaults("fault totals");
+    }
+    write_lag.Log();
   }
 
   void Run() {
@@ -270,10 +438,11 @@ struct SimServer::Impl {
     });
     AcceptCommand();
     AcceptStream();
+    // The Unix time at `start`: the midpoint of two system_clock reads around the steady one (tens of ns apart).
+    const std::int64_t before_ns = UnixNowNs();
     start = std::chrono::steady_clock::now();
-    unix_start_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                        std::chrono::system_clock::now().time_since_epoch())
-                        .count();
+    const std::int64_t after_ns = UnixNowNs();
+    unix_start_ns = before_ns + (after_ns - before_ns) / 2;
     next_sample = 0;
     Tick();
     io.run();
@@ -294,6 +463,18 @@ struct SimServer::Impl {
   std::chrono::steady_clock::time_point start;
   std::int64_t unix_start_ns = 0;  // Unix time at `start`
   std::uint64_t next_sample = 0;
+  std::uint64_t next_summary = 0;
+  std::size_t max_queue = 0;           // writes queued to one stream client before it counts as too slow
+  FaultCounts counts, logged_counts;
+  const Buffer garbage = std::make_shared<const std::vector<std::uint8_t>>(std::begin(kGarbage), std::end(kGarbage));
+  // --stall-after: the stall in progress and what it holds.
+  bool stalling = false;
+  std::uint64_t next_stall_at = 0;
+  std::chrono::steady_clock::time_point stall_end;
+  std::vector<Outgoing> held;
+  std::uint64_t held_frames = 0;
+  std::uint64_t buffer_samples = 1;  // the simulated instrument's buffer: kMaxStallMs of samples
+  WriteLag write_lag;
   bool stopped = false;
   std::uint16_t bound_command_port = 0;
   std::uint16_t bound_stream_port = 0;

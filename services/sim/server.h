@@ -15,12 +15,25 @@
 
 namespace ruffini::sim {
 
-// Faults to inject on purpose (0 = off).
+// Faults to inject on purpose (0 = off). "Every N-th sample" means the samples (serials) k with (k + 1) mod N = 0.
+// docs/sim.md says exactly what each one puts on the wire. Each is counted and logged (the first of a kind at
+// once, then a summary at most once a second, and the totals at shutdown).
 struct Faults {
   std::uint64_t drop_every = 0;        // every N-th sample is not sent (its serial number is skipped)
   std::uint64_t nan_every = 0;         // every N-th sample has a NaN as channel 0's first peak
+  std::uint64_t missing_every = 0;     // every N-th sample leaves one grating out of channel 0 (15 peaks); the
+                                       // m-th such sample (m = (k + 1) / N) drops grating (m - 1) mod 16
+  std::uint64_t garbage_every = 0;     // every N-th sample's frame is preceded by kGarbage (a framing error)
   std::uint64_t disconnect_after = 0;  // each stream client is disconnected after N frames
+  std::uint64_t stall_after = 0;       // after N samples sent, the stream stalls for stall_ms: the samples of
+  std::uint32_t stall_ms = 0;          // the stall are held and sent late in one burst, then N more, and so on
 };
+inline constexpr std::uint32_t kMaxStallMs = 2000;  // the simulated instrument buffers 2 s of samples
+
+// The --garbage-every burst, 16 bytes: a message header whose content_length is 0xDEADBEEF (3735928559, above
+// any decoder's limit: content_too_long as soon as its 8 bytes are in), then the ASCII text "GARBAGE!".
+inline constexpr std::uint8_t kGarbage[16] = {0x00, 0x00, 0x00, 0x00, 0xEF, 0xBE, 0xAD, 0xDE,
+                                              'G',  'A',  'R',  'B',  'A',  'G',  'E',  '!'};
 
 struct ServerConfig {
   std::string host = "127.0.0.1";

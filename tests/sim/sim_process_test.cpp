@@ -1,26 +1,25 @@
 // The real ruffini-sim process on 127.0.0.1 (port 0, --ports-file), read by plain POSIX sockets and the
-// ingest codec. Every wait is a condition with a deadline; the sim is always stopped by pid (SIGTERM, then
-// SIGKILL after a timeout) and reaped.
+// ingest codec. Every wait is a condition with a deadline; the sim is started, always stopped by pid (SIGTERM,
+// then SIGKILL after a timeout) and reaped by ruffini::testing::Process (tests/common/process.h).
 #include <arpa/inet.h>
-#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
-#include <signal.h>
 #include <sys/socket.h>
 #include <sys/time.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <regex>
 #include <string>
-#include <thread>
 #include <vector>
 
+#include "../common/process.h"
 #include "ruffini/dataset/dataset.h"
 #include "ruffini/ingest/hyperion.h"
 
@@ -29,6 +28,7 @@ namespace {
 using namespace ruffini;
 using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
+namespace rt = ruffini::testing;
 
 constexpr std::size_t kRows = 37;
 
@@ -51,89 +51,79 @@ std::string MakeDataset(const std::string& dir) {
   return path;
 }
 
+struct Ports {
+  std::uint16_t command = 0;
+  std::uint16_t stream = 0;
+};
+
+// The sim's --ports-file ("command P" and "stream P" lines), or nullopt while it is missing or incomplete (the
+// sim writes it under a temporary name and renames it, so a complete file is the whole story).
+std::optional<Ports> ReadPortsFile(const std::string& path) {
+  std::ifstream in(path);
+  std::string k1, k2;
+  unsigned c = 0, s = 0;
+  if (!(in >> k1 >> c >> k2 >> s) || k1 != "command" || k2 != "stream" || c == 0 || s == 0 || c > 65535 ||
+      s > 65535) {
+    return std::nullopt;
+  }
+  return Ports{static_cast<std::uint16_t>(c), static_cast<std::uint16_t>(s)};
+}
+
+std::string SceneArg() { return std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/forearm.yaml"; }
+
 class Sim {
  public:
   // Starts ruffini-sim with the given extra arguments; waits (10 s at most) for its ports file.
   // source: {} replays a dataset written here; else the arguments that name the source (e.g. --scenario F).
   explicit Sim(const std::string& name, std::vector<std::string> extra = {}, std::vector<std::string> source = {}) {
-    dir_ = (fs::current_path() / ("sim_" + name)).string();
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    if (source.empty()) source = {"--replay", MakeDataset(dir_)};
-    ports_file_ = dir_ + "/ports";
-    std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", std::string(RUFFINI_SOURCE_DIR) +
-                                     "/config/scenes/forearm.yaml", source[0], source[1], "--rate-hz", "1000",
-                                     "--host", "127.0.0.1", "--command-port", "0", "--stream-port", "0",
-                                     "--ports-file", ports_file_};
+    const std::string dir = (fs::current_path() / ("sim_" + name)).string();
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    if (source.empty()) source = {"--replay", MakeDataset(dir)};
+    const std::string ports_file = dir + "/ports";
+    std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", SceneArg(), source[0], source[1], "--rate-hz",
+                                     "1000", "--host", "127.0.0.1", "--command-port", "0", "--stream-port", "0",
+                                     "--ports-file", ports_file};
     args.insert(args.end(), extra.begin(), extra.end());
-    const std::string out = dir_ + "/stdout", err = dir_ + "/stderr";
-    pid_ = fork();
-    if (pid_ == 0) {
-      const int o = open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      dup2(o, 1);
-      dup2(e, 2);
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      execv(argv[0], argv.data());
-      _exit(127);
+    process_ = rt::Process(std::move(args), dir);
+    std::optional<Ports> ports;
+    const bool up = rt::WaitFor(
+        [&] {
+          ports = ReadPortsFile(ports_file);
+          return ports.has_value() || !process_.Running();
+        },
+        std::chrono::seconds(10));
+    if (ports) {
+      command_port_ = ports->command;
+      stream_port_ = ports->stream;
+    } else if (up) {
+      ADD_FAILURE() << "ruffini-sim exited early: " << process_.stderr_text();
+    } else {
+      ADD_FAILURE() << "no ports file within 10 s";
     }
-    const auto deadline = Clock::now() + std::chrono::seconds(10);
-    while (Clock::now() < deadline) {
-      std::ifstream in(ports_file_);
-      std::string k1, k2;
-      unsigned c = 0, s = 0;
-      if (in >> k1 >> c >> k2 >> s && k1 == "command" && k2 == "stream") {
-        command_port_ = static_cast<std::uint16_t>(c);
-        stream_port_ = static_cast<std::uint16_t>(s);
-        return;
-      }
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        ADD_FAILURE() << "ruffini-sim exited early: " << Slurp(err);
-        return;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    ADD_FAILURE() << "no ports file within 10 s";
   }
-  ~Sim() { Stop(); }
 
   // SIGTERM, then SIGKILL after 5 s; returns the exit status (or -1).
   int Stop() {
-    if (pid_ <= 0) return exit_status_;
-    kill(pid_, SIGTERM);
-    const auto deadline = Clock::now() + std::chrono::seconds(5);
-    int status = 0;
-    for (;;) {
-      if (waitpid(pid_, &status, WNOHANG) == pid_) break;
-      if (Clock::now() > deadline) {
-        kill(pid_, SIGKILL);
-        waitpid(pid_, &status, 0);
-        ADD_FAILURE() << "ruffini-sim ignored SIGTERM for 5 s";
-        break;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const int status = process_.Stop();
+    if (process_.killed() && !kill_reported_) {
+      kill_reported_ = true;
+      ADD_FAILURE() << "ruffini-sim ignored SIGTERM for 5 s";
     }
-    pid_ = -1;
-    exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return exit_status_;
+    return status;
   }
+  ~Sim() { Stop(); }
+  Sim(const Sim&) = delete;
+  Sim& operator=(const Sim&) = delete;
 
-  static std::string Slurp(const std::string& path) {
-    std::ifstream in(path);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  }
-  [[nodiscard]] std::string stdout_text() const { return Slurp(dir_ + "/stdout"); }
-  [[nodiscard]] bool ok() const { return pid_ > 0 && stream_port_ != 0; }
+  [[nodiscard]] std::string stdout_text() const { return process_.stdout_text(); }
+  [[nodiscard]] std::string stderr_text() const { return process_.stderr_text(); }
+  [[nodiscard]] bool ok() { return process_.Running() && stream_port_ != 0; }
   std::uint16_t command_port_ = 0, stream_port_ = 0;
 
  private:
-  std::string dir_, ports_file_;
-  pid_t pid_ = -1;
-  int exit_status_ = -1;
+  rt::Process process_;
+  bool kill_reported_ = false;
 };
 
 // A loopback TCP connection with a 5 s receive timeout.
@@ -168,21 +158,31 @@ class Conn {
 struct Received {
   std::vector<std::uint64_t> serials;
   std::vector<std::int64_t> timestamps_ns;
+  std::vector<std::int64_t> arrival_unix_ns;  // system_clock right after the recv that completed the frame
+  std::vector<std::uint8_t> buffer_available;
+  std::vector<std::uint16_t> count0;          // channel 0's peak count
+  std::vector<std::uint32_t> flags;
   std::vector<Wavelengths> channel0;
   std::vector<ingest::Reason> rejected;
+  std::optional<ingest::Reason> framing_error;  // the decoder needs a resync
   bool closed = false;
   ingest::Counters counters;
 };
 
-// Reads until at least `frames` frames and rejections in all (whole reads: it may return a few more), the
-// peer closes, or 10 s pass.
-Received ReadFrames(Conn& c, std::size_t frames) {
+std::int64_t UnixNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// Reads until at least `frames` frames and rejections in all (whole reads: it may return a few more), a
+// framing error (a test failure unless framing_ok), the peer closes, or 10 s pass.
+Received ReadFrames(Conn& c, std::size_t frames, ingest::StreamDecoder& decoder, bool framing_ok = false) {
   Received r;
-  ingest::StreamDecoder decoder;
   std::vector<std::uint8_t> buf(65536);
   const auto deadline = Clock::now() + std::chrono::seconds(10);
   while (r.serials.size() + r.rejected.size() < frames && Clock::now() < deadline) {
     const ssize_t n = c.Read(buf.data(), buf.size());
+    const std::int64_t arrival_ns = UnixNowNs();
     if (n == 0) {
       r.closed = true;
       break;
@@ -193,13 +193,19 @@ Received ReadFrames(Conn& c, std::size_t frames) {
       const auto res = decoder.Feed(rest);
       rest = rest.subspan(res.consumed);
       if (res.status == ingest::StreamDecoder::Status::kFrame) {
-        r.serials.push_back(decoder.frame().serial_number);
-        r.timestamps_ns.push_back(decoder.frame().timestamp_ns);
+        const auto& f = decoder.frame();
+        r.serials.push_back(f.serial_number);
+        r.timestamps_ns.push_back(f.timestamp_ns);
+        r.arrival_unix_ns.push_back(arrival_ns);
+        r.buffer_available.push_back(f.buffer_available);
+        r.count0.push_back(f.count[0]);
+        r.flags.push_back(decoder.flags());
         r.channel0.push_back(decoder.wavelength_nm());
       } else if (res.status == ingest::StreamDecoder::Status::kRejected) {
         r.rejected.push_back(res.reason);
       } else if (res.status == ingest::StreamDecoder::Status::kNeedsResync) {
-        ADD_FAILURE() << "framing error: " << ingest::ReasonName(res.reason);
+        if (!framing_ok) ADD_FAILURE() << "framing error: " << ingest::ReasonName(res.reason);
+        r.framing_error = res.reason;
         r.counters = decoder.counters();
         return r;
       }
@@ -207,6 +213,21 @@ Received ReadFrames(Conn& c, std::size_t frames) {
   }
   r.counters = decoder.counters();
   return r;
+}
+
+Received ReadFrames(Conn& c, std::size_t frames) {
+  ingest::StreamDecoder decoder;
+  return ReadFrames(c, frames, decoder);
+}
+
+// A count from the sim's last "fault totals: dropped 3, nan 2, ..." log line (written at shutdown).
+std::optional<std::uint64_t> FaultTotal(const std::string& log, const std::string& name) {
+  const auto line = log.rfind("fault totals:");
+  if (line == std::string::npos) return std::nullopt;
+  std::smatch m;
+  const std::string rest = log.substr(line, log.find('\n', line) - line);
+  if (!std::regex_search(rest, m, std::regex("[:,] " + name + " ([0-9]+)"))) return std::nullopt;
+  return std::stoull(m[1].str());
 }
 
 // Sends a command and reads its reply. `reply` views the returned buffer: keep it while reading `reply`.
@@ -270,6 +291,11 @@ TEST(SimProcess, StreamsTheReplayedDatasetWithConsecutiveSerialsToSeveralClients
   // Each sample is stamped with its own time: exactly 1 ms apart at 1 kHz (1 ns of rounding).
   for (std::size_t i = 1; i < ra.timestamps_ns.size(); ++i) {
     ASSERT_NEAR(double(ra.timestamps_ns[i] - ra.timestamps_ns[i - 1]), 1e6, 1.0) << i;
+  }
+  // The timestamp is the scheduled send time, so no frame arrives before it (same host, same Unix clock; 1 ms
+  // of slack for a clock adjustment during the test).
+  for (std::size_t i = 0; i < ra.timestamps_ns.size(); ++i) {
+    ASSERT_GE(ra.arrival_unix_ns[i] - ra.timestamps_ns[i], -1'000'000) << i;
   }
   EXPECT_EQ(sim.Stop(), 0);  // SIGTERM: a clean exit
 }
@@ -357,6 +383,121 @@ TEST(SimProcess, FaultsDropNanAndDisconnect) {
     EXPECT_NE((s + 1) % 7, 0u) << s;   // NaN samples are rejected by the decoder
   }
   EXPECT_EQ(sim.Stop(), 0);
+  // Counted and logged by the sim (totals at shutdown).
+  const std::string log = sim.stderr_text();
+  EXPECT_GT(FaultTotal(log, "dropped").value_or(0), 0u) << log;
+  EXPECT_GT(FaultTotal(log, "nan").value_or(0), 0u) << log;
+  EXPECT_EQ(FaultTotal(log, "disconnected"), 1u) << log;
+  EXPECT_EQ(FaultTotal(log, "missing"), 0u) << log;
+}
+
+TEST(SimProcess, MissingEveryLeavesOneRotatingGratingOutOfChannel0) {
+  Sim sim("missing", {"--missing-every", "5"});
+  ASSERT_TRUE(sim.ok());
+  // A client that allows missing peaks (bands around the dataset's gratings) sees which one went dark; a strict
+  // client (the default) refuses those frames as wrong_peak_count.
+  Wavelengths centre_nm{};
+  for (std::size_t g = 0; g < kGratings; ++g) centre_nm[g] = RowNm(0, g);
+  ingest::DecoderConfig tolerant_config;
+  tolerant_config.pick = ingest::NearestGratingBands(0, centre_nm);
+  tolerant_config.pick->allow_missing = true;
+  ingest::StreamDecoder tolerant(tolerant_config);
+  Conn a(sim.stream_port_), b(sim.stream_port_);
+  ASSERT_TRUE(a.connected());
+  ASSERT_TRUE(b.connected());
+  const auto r = ReadFrames(a, 300, tolerant);
+  const auto strict = ReadFrames(b, 100);
+  ASSERT_GE(r.serials.size(), 300u);
+  EXPECT_TRUE(r.rejected.empty());
+  std::vector<bool> dark_seen(kGratings, false);
+  for (std::size_t i = 0; i < r.serials.size(); ++i) {
+    const std::uint64_t s = r.serials[i];
+    if (i > 0) {
+      ASSERT_EQ(s, r.serials[i - 1] + 1) << i;
+    }
+    const bool missing = (s + 1) % 5 == 0;
+    const std::size_t dark = missing ? std::size_t(((s + 1) / 5 - 1) % kGratings) : kGratings;
+    ASSERT_EQ(r.count0[i], missing ? 15 : 16) << s;
+    ASSERT_EQ((r.flags[i] & kFlagPeakMissing) != 0, missing) << s;
+    for (std::size_t g = 0; g < kGratings; ++g) {
+      if (g == dark) {
+        ASSERT_TRUE(std::isnan(r.channel0[i][g])) << s << " " << g;
+      } else {
+        ASSERT_EQ(r.channel0[i][g], RowNm(std::size_t(s % kRows), g)) << s << " " << g;
+      }
+    }
+    if (missing) dark_seen[dark] = true;
+  }
+  EXPECT_EQ(std::count(dark_seen.begin(), dark_seen.end(), true), std::ptrdiff_t(kGratings));  // it rotates
+  ASSERT_FALSE(strict.rejected.empty());
+  for (auto reason : strict.rejected) EXPECT_EQ(reason, ingest::Reason::kWrongPeakCount);
+  for (auto s : strict.serials) EXPECT_NE((s + 1) % 5, 0u) << s;
+  EXPECT_EQ(sim.Stop(), 0);
+  const std::string log = sim.stderr_text();
+  EXPECT_GE(FaultTotal(log, "missing").value_or(0), 60u) << log;
+}
+
+TEST(SimProcess, GarbageEveryIsAFramingErrorAndAReconnectResyncs) {
+  Sim sim("garbage", {"--garbage-every", "200"});
+  ASSERT_TRUE(sim.ok());
+  ingest::StreamDecoder decoder;
+  Conn a(sim.stream_port_);
+  ASSERT_TRUE(a.connected());
+  const auto r = ReadFrames(a, 1000, decoder, /*framing_ok=*/true);
+  // The 16 bytes before sample 199's frame (or 399's, ...) announce a 0xDEADBEEF-byte content.
+  ASSERT_EQ(r.framing_error, ingest::Reason::kContentTooLong);
+  EXPECT_TRUE(decoder.needs_resync());
+  EXPECT_EQ(r.counters.resyncs, 1u);
+  ASSERT_FALSE(r.serials.empty());
+  for (std::size_t i = 1; i < r.serials.size(); ++i) ASSERT_EQ(r.serials[i], r.serials[i - 1] + 1) << i;
+  EXPECT_EQ((r.serials.back() + 2) % 200, 0u) << r.serials.back();  // the frame before the garbage arrived
+  // The sim keeps serving: a new connection starts on a frame boundary; Reset() keeps the last serial, so the
+  // samples missed while reconnecting count as lost.
+  decoder.Reset();
+  Conn b(sim.stream_port_);
+  ASSERT_TRUE(b.connected());
+  const auto again = ReadFrames(b, 20, decoder, /*framing_ok=*/true);
+  ASSERT_FALSE(again.serials.empty());
+  EXPECT_GT(again.serials.front(), r.serials.back() + 1);
+  EXPECT_GE(again.counters.lost_samples, again.serials.front() - r.serials.back() - 1);
+  EXPECT_EQ(sim.Stop(), 0);
+  const std::string log = sim.stderr_text();
+  EXPECT_GE(FaultTotal(log, "garbage").value_or(0), 1u) << log;
+}
+
+TEST(SimProcess, StallHoldsSamplesThenSendsThemLateInOneBurst) {
+  // Samples 0..299 go out on time; 300..549 (250 ms at 1 kHz) are held; at sample 550's deadline the held ones
+  // go out in one burst, then 550 and on; the next stall starts at 850.
+  Sim sim("stall", {"--stall-after", "300", "--stall-ms", "250"});
+  ASSERT_TRUE(sim.ok());
+  Conn c(sim.stream_port_);
+  ASSERT_TRUE(c.connected());
+  const auto r = ReadFrames(c, 600);
+  ASSERT_GE(r.serials.size(), 600u);
+  ASSERT_LT(r.serials.front(), 300u) << "connected after the stall began";
+  EXPECT_EQ(r.counters.lost_samples, 0u);  // nothing lost: held, not dropped
+  std::size_t first_held = r.serials.size();
+  for (std::size_t i = 0; i < r.serials.size(); ++i) {
+    const std::uint64_t s = r.serials[i];
+    if (i > 0) {
+      ASSERT_EQ(s, r.serials[i - 1] + 1) << i;
+      ASSERT_NEAR(double(r.timestamps_ns[i] - r.timestamps_ns[i - 1]), 1e6, 1.0) << i;  // stamped on schedule
+    }
+    const bool held = s >= 300 && s < 550;
+    // The simulated instrument buffers 2 s (2000 samples); each held sample fills it by 1/2000.
+    const int expected = held ? 100 - int((100 * (s - 300 + 1) + 1999) / 2000) : 100;
+    ASSERT_EQ(int(r.buffer_available[i]), expected) << s;
+    if (s == 300) first_held = i;
+  }
+  ASSERT_LT(first_held, r.serials.size());
+  ASSERT_GE(r.serials.back(), 550u);  // frames resume after the burst
+  // TCP keeps order and nothing else is sent, so no byte after sample 299's frame arrives before the stall
+  // ends: sample 300 arrives at least 250 ms after its timestamp (same host, same Unix clock; 1 ms of slack).
+  EXPECT_GE(r.arrival_unix_ns[first_held] - r.timestamps_ns[first_held], 249'000'000);
+  EXPECT_EQ(sim.Stop(), 0);
+  const std::string log = sim.stderr_text();
+  EXPECT_GE(FaultTotal(log, "stalls").value_or(0), 1u) << log;
+  EXPECT_GE(FaultTotal(log, "sent_late").value_or(0), 250u) << log;
 }
 
 TEST(SimProcess, APortInUseIsAnInputError) {
@@ -364,35 +505,14 @@ TEST(SimProcess, APortInUseIsAnInputError) {
   ASSERT_TRUE(first.ok());
   const std::string dir = (fs::current_path() / "sim_port_clash").string();
   fs::create_directories(dir);
-  const std::string err = dir + "/stderr";
-  std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", std::string(RUFFINI_SOURCE_DIR) +
-                                   "/config/scenes/forearm.yaml", "--replay", MakeDataset(dir),
+  std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", SceneArg(), "--replay", MakeDataset(dir),
                                    "--command-port", std::to_string(first.command_port_), "--stream-port", "0"};
-  const pid_t pid = fork();
-  if (pid == 0) {
-    const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    dup2(e, 2);
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  const auto deadline = Clock::now() + std::chrono::seconds(10);
-  while (waitpid(pid, &status, WNOHANG) != pid) {
-    if (Clock::now() > deadline) {
-      kill(pid, SIGKILL);
-      waitpid(pid, &status, 0);
-      FAIL() << "the second ruffini-sim did not exit";
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 1);
-  EXPECT_NE(Sim::Slurp(err).find("--command-port: cannot listen on 127.0.0.1:" + std::to_string(first.command_port_)),
+  rt::Process second(std::move(args), dir);
+  EXPECT_EQ(second.WaitExit(std::chrono::seconds(10)), 1) << "the second ruffini-sim did not exit with 1";
+  EXPECT_NE(second.stderr_text().find("--command-port: cannot listen on 127.0.0.1:" +
+                                      std::to_string(first.command_port_)),
             std::string::npos)
-      << Sim::Slurp(err);
+      << second.stderr_text();
   EXPECT_EQ(first.Stop(), 0);
 }
 
