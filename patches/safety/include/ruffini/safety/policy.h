@@ -92,7 +92,9 @@ enum class PatchFaultCode : std::uint8_t {
 inline constexpr std::size_t kPatchFaultCodeCount = 11;
 
 // Why an event was refused as input. A refused event is never applied as it stands, and it is a doubt, never
-// a reason to clear: a refused contact latches STOP, any other refused event latches FAULT (kInternal).
+// a reason to clear: time going backwards latches FAULT (kInternal) whatever the event; otherwise a refused
+// contact latches STOP (and counts as above threshold on its patch), any other refused event FAULT (kInternal).
+// Reset is the exception: a refused reset changes nothing (ResetRefusal::kInvalidRequest for time backwards).
 enum class Rejection : std::uint8_t {
   kNone = 0,
   kTimeBackwards,   // now_ns below the newest now_ns seen (any event): FAULT, the deadlines cannot be trusted
@@ -302,7 +304,8 @@ class Policy {
   // Deadlines only: a patch silent past its deadline, joint states older than the limit.
   Step Tick(Data& d, std::int64_t now_ns) const noexcept;
   // A periodic publication: Tick, then seq +1 (once: a change found by the Tick is that publication).
-  // Always returns publish = true (unless now_ns went backwards: then the FAULT it latches is published).
+  // Always returns publish = true, also when now_ns went backwards (the FAULT it latches is that publication,
+  // published at the newest good time).
   Step Publish(Data& d, std::int64_t now_ns) const noexcept;
   // Clear the latch named by r.stop_epoch. Checks in this order: now_ns not backwards (kInvalidRequest),
   // authorized, not shutting down, latched, the epoch, every cause gone (a patch past its deadline counts as
