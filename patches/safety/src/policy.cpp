@@ -1,0 +1,609 @@
+#include "ruffini/safety/policy.h"
+
+#include <cmath>
+#include <sstream>
+#include <utility>
+
+#include "ruffini/error.h"
+
+namespace ruffini::safety {
+namespace {
+
+bool HasStream(LinkState l) noexcept {
+  return l == LinkState::kHealthy || l == LinkState::kUnhealthy || l == LinkState::kSilent;
+}
+bool Live(LinkState l) noexcept { return l == LinkState::kHealthy || l == LinkState::kUnhealthy; }
+
+bool SameForce(float a, float b) noexcept { return a == b || (std::isnan(a) && std::isnan(b)); }
+
+std::string Quoted(std::string_view s) { return "('" + std::string(s) + "')"; }
+
+}  // namespace
+
+bool Cause::operator==(const Cause& o) const noexcept {
+  return kind == o.kind && patch == o.patch && region == o.region && SameForce(force_n, o.force_n) &&
+         threshold_n == o.threshold_n && p_bc_m == o.p_bc_m && patch_fault == o.patch_fault && doubt == o.doubt &&
+         t_ns == o.t_ns;
+}
+
+bool PatchState::operator==(const PatchState& o) const noexcept {
+  return link == o.link && ever_connected == o.ever_connected && last_seen_t_ns == o.last_seen_t_ns &&
+         healthy_since_t_ns == o.healthy_since_t_ns && fault_in_force == o.fault_in_force && fault == o.fault &&
+         protocol_fault == o.protocol_fault && contact_over == o.contact_over &&
+         SameForce(contact_force_n, o.contact_force_n);
+}
+
+// --- Config ---------------------------------------------------------------------------------------------------
+
+void Validate(const Config& c) {
+  auto fail = [](const std::string& what) { throw InputError("safety." + what); };
+  if (c.regions.empty()) fail("regions is empty: every patch's contacts are judged in a body region");
+  for (std::size_t i = 0; i < c.regions.size(); ++i) {
+    const RegionConfig& r = c.regions[i];
+    const std::string at = "regions[" + std::to_string(i) + "]";
+    if (r.name.empty()) fail(at + ".name is empty");
+    for (std::size_t j = 0; j < i; ++j) {
+      if (c.regions[j].name == r.name) fail(at + ".name " + Quoted(r.name) + " is a duplicate");
+    }
+    if (!std::isfinite(r.threshold_n) || r.threshold_n <= 0.0f) {
+      std::ostringstream s;
+      s << at << ".threshold_n (" << r.threshold_n << ") must be a finite force above 0 N";
+      fail(s.str());
+    }
+  }
+  if (c.patches.empty()) fail("patches is empty: a scene names at least one patch");
+  for (std::size_t i = 0; i < c.patches.size(); ++i) {
+    const PatchConfig& p = c.patches[i];
+    const std::string at = "patches[" + std::to_string(i) + "]";
+    if (p.id.empty()) fail(at + ".id is empty");
+    for (std::size_t j = 0; j < i; ++j) {
+      if (c.patches[j].id == p.id) fail(at + ".id " + Quoted(p.id) + " is a duplicate");
+    }
+    bool known = false;
+    for (const RegionConfig& r : c.regions) known = known || r.name == p.region;
+    if (!known) fail(at + ".region " + Quoted(p.region) + " names no region in safety.regions");
+    if (p.silence_deadline_ns <= 0) {
+      fail(at + ".silence_deadline_ns (" + std::to_string(p.silence_deadline_ns) + ") must be above 0");
+    }
+  }
+  if (c.joint_state_max_age_ns <= 0) {
+    fail("joint_state_max_age_ns (" + std::to_string(c.joint_state_max_age_ns) + ") must be above 0");
+  }
+  if (c.healthy_before_reset_ns < 0) {
+    fail("healthy_before_reset_ns (" + std::to_string(c.healthy_before_reset_ns) + ") must be 0 or more");
+  }
+}
+
+// --- Data -----------------------------------------------------------------------------------------------------
+
+Data::Data(const Policy& policy, std::int64_t start_ns) : patches_(policy.patch_count()), now_ns_(start_ns) {
+  const Cause startup{.kind = CauseKind::kStartup, .t_ns = start_ns};
+  state_ = SafetyState{.state = State::kFault,
+                       .stop_epoch = 1,
+                       .seq = 1,
+                       .cause = startup,
+                       .changed_t_ns = start_ns,
+                       .published_t_ns = start_ns};
+  latest_cause_ = startup;
+  counters_.faults = 1;
+  counters_.causes[static_cast<std::size_t>(CauseKind::kStartup)] = 1;
+  counters_.publications = 1;
+}
+
+// --- Policy: lookups --------------------------------------------------------------------------------------------
+
+Policy::Policy(Config config) : config_(std::move(config)) { Validate(config_); }
+
+std::int32_t Policy::FindPatch(std::string_view id) const noexcept {
+  for (std::size_t i = 0; i < config_.patches.size(); ++i) {
+    if (config_.patches[i].id == id) return static_cast<std::int32_t>(i);
+  }
+  return kNoPatch;
+}
+
+std::int32_t Policy::FindRegion(std::string_view name) const noexcept {
+  for (std::size_t i = 0; i < config_.regions.size(); ++i) {
+    if (config_.regions[i].name == name) return static_cast<std::int32_t>(i);
+  }
+  return kNoRegion;
+}
+
+std::string_view Policy::patch_id(std::int32_t patch) const noexcept {
+  if (patch < 0 || static_cast<std::size_t>(patch) >= config_.patches.size()) return {};
+  return config_.patches[static_cast<std::size_t>(patch)].id;
+}
+
+std::string_view Policy::region_name(std::int32_t region) const noexcept {
+  if (region < 0 || static_cast<std::size_t>(region) >= config_.regions.size()) return {};
+  return config_.regions[static_cast<std::size_t>(region)].name;
+}
+
+// --- Policy: the latch ------------------------------------------------------------------------------------------
+
+// A cause arrived. is_new: it was not already present (a contact still above threshold frame after frame,
+// an unhealthy heartbeat after an unhealthy heartbeat, are one cause). While CLEAR every cause latches,
+// new or not, so a bookkeeping slip can never leave a present cause unlatched.
+void Policy::Latch(Data& d, const Cause& cause, Severity severity, bool is_new) const noexcept {
+  SafetyState& s = d.state_;
+  if (!is_new && s.state != State::kClear) return;
+  Counters& n = d.counters_;
+  ++n.causes[static_cast<std::size_t>(cause.kind)];
+  d.latest_cause_ = cause;
+  if (d.shutting_down_) {  // FAULT for good; the published cause stays kShuttingDown
+    ++n.causes_while_latched;
+    return;
+  }
+  if (s.state == State::kClear) {
+    s.state = severity == Severity::kStop ? State::kStop : State::kFault;
+    ++(severity == Severity::kStop ? n.stops : n.faults);
+  } else if (s.state == State::kStop && severity == Severity::kFault) {
+    s.state = State::kFault;  // escalation: a new latch, never the other way
+    ++n.faults;
+    ++n.escalations;
+  } else {
+    ++n.causes_while_latched;
+    if (!config_.new_epoch_per_cause) return;  // recorded (counters, latest_cause); the epoch stays
+    ++s.stop_epoch;
+    ++n.epochs;
+    s.cause = cause;
+    d.dirty_ = true;
+    return;
+  }
+  ++s.stop_epoch;
+  ++n.epochs;
+  s.cause = cause;
+  s.changed_t_ns = d.now_ns_;
+  d.dirty_ = true;
+}
+
+Step Policy::Finish(Data& d, Step step) const noexcept {
+  if (d.dirty_) {
+    d.dirty_ = false;
+    ++d.state_.seq;
+    ++d.counters_.publications;
+    d.state_.published_t_ns = d.now_ns_;
+    step.publish = true;
+  }
+  return step;
+}
+
+// Counts the rejection and latches the doubt; the caller publishes (Finish) once.
+Rejection Policy::Reject(Data& d, Rejection why, Cause cause, Severity severity) const noexcept {
+  ++d.counters_.rejections[static_cast<std::size_t>(why)];
+  cause.doubt = why;
+  if (cause.t_ns == 0) cause.t_ns = d.now_ns_;
+  Latch(d, cause, severity, true);
+  return why;
+}
+
+Step Policy::Refuse(Data& d, Rejection why, Cause cause, Severity severity) const noexcept {
+  return Finish(d, Step{.rejection = Reject(d, why, cause, severity)});
+}
+
+// Time first: an event from the past is refused (the deadlines cannot be judged on it) and is a FAULT;
+// it is not applied. Then every deadline at the new now.
+bool Policy::Advance(Data& d, std::int64_t now_ns) const noexcept {
+  if (now_ns < d.now_ns_) return false;
+  d.now_ns_ = now_ns;
+  CheckDeadlines(d);
+  return true;
+}
+
+Rejection Policy::Backwards(Data& d) const noexcept {
+  return Reject(d, Rejection::kTimeBackwards, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
+}
+
+void Policy::CheckDeadlines(Data& d) const noexcept {
+  const std::int64_t now = d.now_ns_;
+  for (std::size_t i = 0; i < d.patches_.size(); ++i) {
+    PatchState& p = d.patches_[i];
+    if (Live(p.link) && now - p.last_seen_t_ns > config_.patches[i].silence_deadline_ns) {
+      p.link = LinkState::kSilent;
+      p.healthy_since_t_ns.reset();
+      Latch(d, Cause{.kind = CauseKind::kPatchSilent, .patch = static_cast<std::int32_t>(i), .t_ns = now},
+            Severity::kFault, true);
+    }
+  }
+  if (config_.joint_states_required && d.joint_last_ns_ && !d.joint_stale_ &&
+      now - *d.joint_last_ns_ > config_.joint_state_max_age_ns) {
+    d.joint_stale_ = true;
+    Latch(d, Cause{.kind = CauseKind::kJointStatesStale, .t_ns = now}, Severity::kFault, true);
+  }
+}
+
+// Any message on a stream is liveness; a silent link that speaks again is live again (not healthy until
+// a healthy heartbeat, and the latch it caused stays).
+void Policy::Seen(Data& d, std::size_t patch) const noexcept {
+  PatchState& p = d.patches_[patch];
+  p.last_seen_t_ns = d.now_ns_;
+  if (p.link == LinkState::kSilent) p.link = LinkState::kUnhealthy;
+}
+
+// --- Policy: events ---------------------------------------------------------------------------------------------
+
+Step Policy::OnHelloAccepted(Data& d, std::string_view patch_id, std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  const std::int32_t i = FindPatch(patch_id);
+  if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
+  PatchState& p = d.patches_[static_cast<std::size_t>(i)];
+  p.ever_connected = true;
+  p.protocol_fault = false;  // a fresh hello starts a trustworthy stream
+  if (!Live(p.link)) {
+    p.link = LinkState::kUnhealthy;  // live, not healthy until a healthy heartbeat
+    p.healthy_since_t_ns.reset();
+  }
+  Seen(d, static_cast<std::size_t>(i));
+  return Finish(d, {});
+}
+
+Step Policy::OnHelloRefused(Data& d, std::string_view patch_id, std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  const std::int32_t i = FindPatch(patch_id);
+  if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
+  PatchState& p = d.patches_[static_cast<std::size_t>(i)];
+  const bool is_new = p.link != LinkState::kRefused;
+  p.link = LinkState::kRefused;
+  p.healthy_since_t_ns.reset();
+  Latch(d, Cause{.kind = CauseKind::kPatchMissing, .patch = i, .t_ns = now_ns}, Severity::kFault, is_new);
+  return Finish(d, {});
+}
+
+Step Policy::OnHeartbeat(Data& d, std::string_view patch_id, const Heartbeat& hb,
+                         std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  const std::int32_t i = FindPatch(patch_id);
+  if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
+  PatchState& p = d.patches_[static_cast<std::size_t>(i)];
+  if (!HasStream(p.link)) {
+    return Refuse(d, Rejection::kNotConnected, Cause{.kind = CauseKind::kInternal, .patch = i}, Severity::kFault);
+  }
+  Seen(d, static_cast<std::size_t>(i));
+  const bool healthy = hb.healthy && hb.active_fault == PatchFaultCode::kUnspecified;
+  if (healthy) {
+    p.fault_in_force = false;
+    if (!hb.in_contact) p.contact_over = false;  // the decoder's gate is closed: the contact has ended
+    if (p.protocol_fault) {
+      p.link = LinkState::kUnhealthy;
+    } else {
+      p.link = LinkState::kHealthy;
+      if (!p.healthy_since_t_ns) p.healthy_since_t_ns = now_ns;
+    }
+    return Finish(d, {});
+  }
+  const bool is_new = !p.fault_in_force;
+  p.fault_in_force = true;
+  p.fault = hb.active_fault;
+  p.link = LinkState::kUnhealthy;
+  p.healthy_since_t_ns.reset();
+  Latch(d, Cause{.kind = CauseKind::kPatchFault, .patch = i, .patch_fault = hb.active_fault, .t_ns = now_ns},
+        Severity::kFault, is_new);
+  return Finish(d, {});
+}
+
+Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  Cause cause{.kind = CauseKind::kContact,
+              .force_n = c.force_n,
+              .p_bc_m = c.p_bc_m,
+              .t_ns = c.t_ns != 0 ? c.t_ns : now_ns};
+  const std::int32_t i = FindPatch(patch_id);
+  if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, cause, Severity::kStop);
+  cause.patch = i;
+  PatchState& p = d.patches_[static_cast<std::size_t>(i)];
+  const std::int32_t region =
+      c.region.empty() ? FindRegion(config_.patches[static_cast<std::size_t>(i)].region) : FindRegion(c.region);
+  Rejection why = Rejection::kNone;
+  if (region == kNoRegion) {
+    why = Rejection::kUnknownRegion;
+  } else {
+    cause.region = region;
+    cause.threshold_n = config_.regions[static_cast<std::size_t>(region)].threshold_n;
+    if (!std::isfinite(c.force_n)) {
+      why = Rejection::kNonFiniteForce;
+    } else if (c.force_n < 0.0f) {
+      why = Rejection::kNegativeForce;
+    } else if (!HasStream(p.link)) {
+      why = Rejection::kNotConnected;
+    }
+  }
+  if (why != Rejection::kNone) {
+    // A contact the policy cannot judge counts as one above its threshold until a good frame, a release or
+    // a healthy heartbeat out of contact says otherwise.
+    p.contact_over = true;
+    p.contact_force_n = c.force_n;
+    return Refuse(d, why, cause, Severity::kStop);
+  }
+  Seen(d, static_cast<std::size_t>(i));
+  const bool over = c.force_n > cause.threshold_n;  // at the threshold never stops
+  const bool was_over = p.contact_over;
+  p.contact_force_n = c.force_n;
+  p.contact_over = over && !c.released;
+  if (over) Latch(d, cause, Severity::kStop, !was_over);
+  return Finish(d, {});
+}
+
+Step Policy::OnPatchFault(Data& d, std::string_view patch_id, PatchFaultCode code,
+                          std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  const std::int32_t i = FindPatch(patch_id);
+  if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
+  PatchState& p = d.patches_[static_cast<std::size_t>(i)];
+  // A fault only makes things worse: applied whatever the link (liveness only when there is a stream).
+  if (HasStream(p.link)) {
+    Seen(d, static_cast<std::size_t>(i));
+    p.link = LinkState::kUnhealthy;
+  }
+  const bool is_new = !p.fault_in_force;
+  p.fault_in_force = true;
+  p.fault = code;
+  p.healthy_since_t_ns.reset();
+  Latch(d, Cause{.kind = CauseKind::kPatchFault, .patch = i, .patch_fault = code, .t_ns = now_ns}, Severity::kFault,
+        is_new);
+  return Finish(d, {});
+}
+
+Step Policy::OnProtocolError(Data& d, std::string_view patch_id, std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  const std::int32_t i = FindPatch(patch_id);
+  if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
+  PatchState& p = d.patches_[static_cast<std::size_t>(i)];
+  const bool is_new = !p.protocol_fault;
+  p.protocol_fault = true;
+  if (Live(p.link)) p.link = LinkState::kUnhealthy;
+  p.healthy_since_t_ns.reset();
+  Latch(d, Cause{.kind = CauseKind::kPatchProtocol, .patch = i, .t_ns = now_ns}, Severity::kFault, is_new);
+  return Finish(d, {});
+}
+
+Step Policy::OnDisconnect(Data& d, std::string_view patch_id, std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  const std::int32_t i = FindPatch(patch_id);
+  if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
+  PatchState& p = d.patches_[static_cast<std::size_t>(i)];
+  const bool is_new = Live(p.link);  // a silent link ending, or a second disconnect, is the same cause
+  if (p.link != LinkState::kRefused) p.link = LinkState::kDisconnected;
+  p.healthy_since_t_ns.reset();
+  Latch(d, Cause{.kind = CauseKind::kPatchSilent, .patch = i, .t_ns = now_ns}, Severity::kFault, is_new);
+  return Finish(d, {});
+}
+
+Step Policy::OnJointState(Data& d, std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  d.joint_last_ns_ = now_ns;
+  d.joint_stale_ = false;
+  return Finish(d, {});
+}
+
+Step Policy::Tick(Data& d, std::int64_t now_ns) const noexcept {
+  if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
+  return Finish(d, {});
+}
+
+Step Policy::Publish(Data& d, std::int64_t now_ns) const noexcept {
+  const Step step{.rejection = Advance(d, now_ns) ? Rejection::kNone : Backwards(d)};
+  d.dirty_ = true;  // a change found just now is this publication: one seq either way
+  return Finish(d, step);
+}
+
+Step Policy::Shutdown(Data& d, std::int64_t now_ns) const noexcept {
+  const Step step{.rejection = Advance(d, now_ns) ? Rejection::kNone : Backwards(d)};
+  if (d.shutting_down_) return Finish(d, step);
+  SafetyState& s = d.state_;
+  Counters& n = d.counters_;
+  const Cause cause{.kind = CauseKind::kShuttingDown, .t_ns = d.now_ns_};
+  ++n.causes[static_cast<std::size_t>(CauseKind::kShuttingDown)];
+  if (s.state != State::kFault) {
+    ++n.faults;
+    if (s.state == State::kStop) ++n.escalations;
+    s.state = State::kFault;
+    s.changed_t_ns = d.now_ns_;
+  } else {
+    ++n.causes_while_latched;
+  }
+  // Always a new epoch: shutdown supersedes every other cause, and a reset in flight names an older epoch.
+  ++s.stop_epoch;
+  ++n.epochs;
+  s.cause = cause;
+  d.latest_cause_ = cause;
+  d.shutting_down_ = true;
+  d.dirty_ = true;
+  return Finish(d, step);
+}
+
+// --- Policy: reset ----------------------------------------------------------------------------------------------
+
+Cause Policy::FirstCausePresent(const Data& d, std::int64_t now_ns) const noexcept {
+  for (std::size_t k = 0; k < d.patches_.size(); ++k) {
+    const PatchState& p = d.patches_[k];
+    const auto i = static_cast<std::int32_t>(k);
+    if (p.link == LinkState::kRefused || (!HasStream(p.link) && !p.ever_connected)) {
+      return {.kind = CauseKind::kPatchMissing, .patch = i, .t_ns = now_ns};
+    }
+    if (!HasStream(p.link) || p.link == LinkState::kSilent ||
+        now_ns - p.last_seen_t_ns > config_.patches[k].silence_deadline_ns) {
+      return {.kind = CauseKind::kPatchSilent, .patch = i, .t_ns = now_ns};
+    }
+    if (p.protocol_fault) return {.kind = CauseKind::kPatchProtocol, .patch = i, .t_ns = now_ns};
+    if (p.fault_in_force) {
+      return {.kind = CauseKind::kPatchFault, .patch = i, .patch_fault = p.fault, .t_ns = now_ns};
+    }
+    if (p.contact_over) {
+      const std::int32_t region = FindRegion(config_.patches[k].region);
+      return {.kind = CauseKind::kContact,
+              .patch = i,
+              .region = region,
+              .force_n = p.contact_force_n,
+              .threshold_n = config_.regions[static_cast<std::size_t>(region)].threshold_n,
+              .t_ns = now_ns};
+    }
+  }
+  if (config_.joint_states_required &&
+      (!d.joint_last_ns_ || now_ns - *d.joint_last_ns_ > config_.joint_state_max_age_ns)) {
+    return {.kind = CauseKind::kJointStatesStale, .t_ns = now_ns};
+  }
+  return {};
+}
+
+ResetResult Policy::Reset(Data& d, const ResetRequest& r, std::int64_t now_ns) const noexcept {
+  ResetResult out;
+  auto refuse = [&](ResetRefusal why) {
+    ++d.counters_.resets_refused[static_cast<std::size_t>(why)];
+    out.reason = why;
+    out.current_epoch = d.state_.stop_epoch;
+    return out;
+  };
+  if (now_ns < d.now_ns_) {
+    ++d.counters_.rejections[static_cast<std::size_t>(Rejection::kTimeBackwards)];
+    return refuse(ResetRefusal::kInvalidRequest);
+  }
+  if (!r.authorized) return refuse(ResetRefusal::kUnauthorized);
+  if (d.shutting_down_) return refuse(ResetRefusal::kShuttingDown);
+  if (d.state_.state == State::kClear) return refuse(ResetRefusal::kNotLatched);
+  if (r.stop_epoch != d.state_.stop_epoch) return refuse(ResetRefusal::kWrongEpoch);
+  out.blocking = FirstCausePresent(d, now_ns);
+  if (out.blocking.kind != CauseKind::kNone) return refuse(ResetRefusal::kCausePresent);
+  for (std::size_t k = 0; k < d.patches_.size(); ++k) {
+    const PatchState& p = d.patches_[k];
+    const std::int64_t healthy_for = p.healthy_since_t_ns ? now_ns - *p.healthy_since_t_ns : 0;
+    if (!p.healthy_since_t_ns || healthy_for < config_.healthy_before_reset_ns) {
+      out.blocking = Cause{.patch = static_cast<std::int32_t>(k), .t_ns = now_ns};
+      out.healthy_for_ns = healthy_for;
+      return refuse(ResetRefusal::kNotHealthyLongEnough);
+    }
+  }
+  // Accepted. Nothing was due at now_ns (FirstCausePresent judged every deadline at it), so none is skipped.
+  d.now_ns_ = now_ns;
+  d.state_.state = State::kClear;
+  d.state_.cause = Cause{};
+  d.state_.changed_t_ns = now_ns;
+  d.dirty_ = true;
+  ++d.counters_.resets_accepted;
+  Finish(d, {});
+  out.accepted = true;
+  out.current_epoch = d.state_.stop_epoch;
+  return out;
+}
+
+// --- Names and descriptions -------------------------------------------------------------------------------------
+
+std::string_view StateName(State s) noexcept {
+  switch (s) {
+    case State::kClear: return "clear";
+    case State::kStop: return "stop";
+    case State::kFault: return "fault";
+  }
+  return "unspecified";
+}
+
+std::string_view CauseKindName(CauseKind k) noexcept {
+  switch (k) {
+    case CauseKind::kNone: return "unspecified";
+    case CauseKind::kContact: return "contact";
+    case CauseKind::kPatchFault: return "patch_fault";
+    case CauseKind::kPatchSilent: return "patch_silent";
+    case CauseKind::kPatchMissing: return "patch_missing";
+    case CauseKind::kPatchProtocol: return "patch_protocol";
+    case CauseKind::kJointStatesStale: return "joint_states_stale";
+    case CauseKind::kStartup: return "startup";
+    case CauseKind::kShuttingDown: return "shutting_down";
+    case CauseKind::kInternal: return "internal";
+  }
+  return "unspecified";
+}
+
+std::string_view ResetRefusalName(ResetRefusal r) noexcept {
+  switch (r) {
+    case ResetRefusal::kNone: return "unspecified";
+    case ResetRefusal::kWrongEpoch: return "wrong_epoch";
+    case ResetRefusal::kNotLatched: return "not_latched";
+    case ResetRefusal::kCausePresent: return "cause_present";
+    case ResetRefusal::kNotHealthyLongEnough: return "not_healthy_long_enough";
+    case ResetRefusal::kUnauthorized: return "unauthorized";
+    case ResetRefusal::kShuttingDown: return "shutting_down";
+    case ResetRefusal::kInvalidRequest: return "invalid_request";
+  }
+  return "unspecified";
+}
+
+std::string_view LinkStateName(LinkState l) noexcept {
+  switch (l) {
+    case LinkState::kUnspecified: return "unspecified";
+    case LinkState::kDisconnected: return "disconnected";
+    case LinkState::kHelloPending: return "hello_pending";
+    case LinkState::kRefused: return "refused";
+    case LinkState::kHealthy: return "healthy";
+    case LinkState::kUnhealthy: return "unhealthy";
+    case LinkState::kSilent: return "silent";
+  }
+  return "unspecified";
+}
+
+std::string_view PatchFaultCodeName(PatchFaultCode c) noexcept {
+  switch (c) {
+    case PatchFaultCode::kUnspecified: return "unspecified";
+    case PatchFaultCode::kInterrogatorSilent: return "interrogator_silent";
+    case PatchFaultCode::kInterrogatorDisconnected: return "interrogator_disconnected";
+    case PatchFaultCode::kFramesRejected: return "frames_rejected";
+    case PatchFaultCode::kFramesLost: return "frames_lost";
+    case PatchFaultCode::kBaselineInvalid: return "baseline_invalid";
+    case PatchFaultCode::kBaselineStale: return "baseline_stale";
+    case PatchFaultCode::kModelMismatch: return "model_mismatch";
+    case PatchFaultCode::kOverloaded: return "overloaded";
+    case PatchFaultCode::kShuttingDown: return "shutting_down";
+    case PatchFaultCode::kInternal: return "internal";
+  }
+  return "unspecified";
+}
+
+std::string_view RejectionName(Rejection r) noexcept {
+  switch (r) {
+    case Rejection::kNone: return "none";
+    case Rejection::kTimeBackwards: return "time_backwards";
+    case Rejection::kUnknownPatch: return "unknown_patch";
+    case Rejection::kUnknownRegion: return "unknown_region";
+    case Rejection::kNonFiniteForce: return "non_finite_force";
+    case Rejection::kNegativeForce: return "negative_force";
+    case Rejection::kNotConnected: return "not_connected";
+  }
+  return "none";
+}
+
+std::string Describe(const Policy& p, const Cause& c) {
+  std::ostringstream s;
+  s << CauseKindName(c.kind);
+  if (c.patch != kNoPatch) s << " patch '" << p.patch_id(c.patch) << "'";
+  if (c.kind == CauseKind::kContact) {
+    s << " force " << c.force_n << " N";
+    if (c.region != kNoRegion) s << " above region '" << p.region_name(c.region) << "' threshold " << c.threshold_n << " N";
+    if (c.p_bc_m) s << " at (" << (*c.p_bc_m)[0] << ", " << (*c.p_bc_m)[1] << ", " << (*c.p_bc_m)[2] << ") m";
+  }
+  if (c.kind == CauseKind::kPatchFault) s << " (" << PatchFaultCodeName(c.patch_fault) << ")";
+  if (c.doubt != Rejection::kNone) s << " [doubt: " << RejectionName(c.doubt) << "]";
+  s << " at t_ns " << c.t_ns;
+  return s.str();
+}
+
+std::string Describe(const Policy& p, const ResetResult& r) {
+  std::ostringstream s;
+  if (r.accepted) {
+    s << "reset accepted: stop_epoch " << r.current_epoch << " cleared";
+    return s.str();
+  }
+  s << "reset refused (" << ResetRefusalName(r.reason) << "): ";
+  switch (r.reason) {
+    case ResetRefusal::kWrongEpoch: s << "the current stop_epoch is " << r.current_epoch; break;
+    case ResetRefusal::kNotLatched: s << "the state is CLEAR"; break;
+    case ResetRefusal::kCausePresent: s << "cause still present: " << Describe(p, r.blocking); break;
+    case ResetRefusal::kNotHealthyLongEnough:
+      s << "patch '" << p.patch_id(r.blocking.patch) << "' healthy for " << r.healthy_for_ns << " ns of the "
+        << p.config().healthy_before_reset_ns << " ns required";
+      break;
+    case ResetRefusal::kUnauthorized: s << "the caller may not reset"; break;
+    case ResetRefusal::kShuttingDown: s << "the aggregator is shutting down"; break;
+    case ResetRefusal::kInvalidRequest: s << "the aggregator's clock went backwards"; break;
+    case ResetRefusal::kNone: break;
+  }
+  return s.str();
+}
+
+}  // namespace ruffini::safety
