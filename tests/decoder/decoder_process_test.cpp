@@ -362,6 +362,41 @@ TEST_F(DecoderProcess, ReconnectsToTheAggregatorWithoutReplayingStaleMessages) {
   for (const auto& m : got) EXPECT_GE(m.message.decoder_t_ns(), back - 50'000'000) << m.message.DebugString();
 }
 
+TEST_F(DecoderProcess, GarbageBytesForceAResyncAndTheDecoderRecovers) {
+  AggregatorStub agg;
+  // Every 1500th frame is preceded by 16 garbage bytes (a header claiming 0xDEADBEEF bytes of content).
+  Sim sim = Sim::Start(Dir("sim"), {"--garbage-every", "1500"});
+  Decoder dec = Decoder::Start(Dir("dec"), sim.stream_port, agg.address(), {"--silence-ms", "100"});
+  ASSERT_TRUE(agg.WaitFor([](const auto& r) {
+    const auto* h = LastHeartbeat(r);
+    return h != nullptr && Rejected(*h, v1::FRAME_REJECT_REASON_CONTENT_TOO_LONG) >= 1 && h->frames() > 2000;
+  }, 15s)) << dec.process.stderr_text();
+  const std::string text = Scrape(dec.metrics_port);
+  EXPECT_GE(Metric(text, "ruffini_decoder_interrogator_resyncs_total{patch=\"forearm\"}"), 1.0);
+  EXPECT_GE(Metric(text, "ruffini_decoder_interrogator_connects_total{patch=\"forearm\"}"), 2.0);
+  EXPECT_TRUE(HasFault(agg.Snapshot(), v1::PATCH_FAULT_CODE_INTERROGATOR_DISCONNECTED, 1));
+  EXPECT_TRUE(agg.WaitFor([](const auto& r) { return HealthyHeartbeat(r); }, 5s));
+  EXPECT_TRUE(dec.process.Running());
+}
+
+TEST_F(DecoderProcess, ADarkGratingIsAMissingPeakNotARejectedFrame) {
+  AggregatorStub agg;
+  // Every 10th frame, one grating's peak is left out of the channel (15 peaks), as the instrument does.
+  Sim sim = Sim::Start(Dir("sim"), {"--missing-every", "10"});
+  Decoder dec = Decoder::Start(Dir("dec"), sim.stream_port, agg.address(), {"--silence-ms", "100"});
+  ASSERT_TRUE(agg.WaitFor([](const auto& r) {
+    const auto* h = LastHeartbeat(r);
+    return h != nullptr && h->valid_frames() > 1000;
+  }, 15s)) << dec.process.stderr_text();
+  const v1::Heartbeat h = *LastHeartbeat(agg.Snapshot());
+  EXPECT_EQ(Rejected(h, v1::FRAME_REJECT_REASON_WRONG_PEAK_COUNT), 0u);
+  EXPECT_EQ(Rejected(h, v1::FRAME_REJECT_REASON_PEAK_OUTSIDE_BANDS), 0u);
+  EXPECT_TRUE(h.healthy());
+  // Every frame after the capture was decoded, the ones with a dark grating included.
+  const std::uint64_t capturing = Rejected(h, v1::FRAME_REJECT_REASON_CAPTURING);
+  EXPECT_EQ(h.valid_frames() + capturing, h.frames());
+}
+
 TEST_F(DecoderProcess, ARefusedHelloIsLoggedAndRetried) {
   AggregatorStub agg;
   agg.RefuseHellos(v1::HELLO_REFUSAL_MODEL_MISMATCH);

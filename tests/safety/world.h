@@ -15,6 +15,7 @@ inline constexpr std::int64_t kMs = 1'000'000;
 // joint states within 50 ms, 200 ms healthy before a reset.
 inline Config TwoPatchScene() {
   Config c;
+  c.new_epoch_per_cause = false;  // the table rows assume it; EpochPerCause() turns it on
   c.regions = {{.name = "forearm", .threshold_n = 160.0f, .source = "quoted ISO/TS 15066 value (FACTS.md)"},
                {.name = "upper_arm", .threshold_n = 150.0f, .source = "quoted ISO/TS 15066 value (FACTS.md)"},
                {.name = "hand", .threshold_n = 140.0f, .source = "quoted ISO/TS 15066 value (FACTS.md)"}};

@@ -130,11 +130,12 @@ struct Config {
   std::int64_t joint_state_max_age_ns = 50'000'000;  // older than this (strictly, by arrival) is stale
   // Before a reset: every patch continuously healthy for at least this long (200 ms = 20 heartbeats).
   std::int64_t healthy_before_reset_ns = 200'000'000;
-  // false (the default): a new cause while latched (same or lower severity) is recorded and keeps the
-  //   epoch; only a new latch (CLEAR -> STOP/FAULT, the STOP -> FAULT escalation, Shutdown) takes epoch + 1.
-  // true: every new cause also takes epoch + 1 and becomes the published cause, as docs/contracts.md words
-  //   it today, so a reset naming the epoch an operator saw is refused once anything new has happened.
-  bool new_epoch_per_cause = false;
+  // true (the default, the contract in docs/contracts.md): every new cause while latched also takes
+  //   epoch + 1 and becomes the published cause, so a reset naming the epoch an operator saw is refused once
+  //   anything new has happened (the more cautious reading: the operator must see the newest cause).
+  // false: a new cause while latched (same or lower severity) is recorded and keeps the epoch; only a new
+  //   latch (CLEAR -> STOP/FAULT, the STOP -> FAULT escalation, Shutdown) takes epoch + 1.
+  bool new_epoch_per_cause = true;
 };
 
 // Throws InputError naming the field and the value: "safety.patches[2].id ('forearm') is a duplicate".
