@@ -334,6 +334,20 @@ TEST_F(SceneFiles, MissingPatchSpecIsNamed) {
   }
 }
 
+TEST(Scenes, CobotSceneLoadsForTheTwin) {
+  // The twin reads the patches and its own section; the robot, mounts and safety zones are other parts'.
+  const auto cobot = LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/cobot.yaml");
+  ASSERT_EQ(cobot.patches.size(), 4u);
+  EXPECT_EQ(cobot.patches[1].name, "forearm_b");
+  EXPECT_EQ(cobot.Patch("upper_arm_b").spec.surface_radius_mm, 37.4);
+  // Its twin section is the bench scene's: the same effects and probe.
+  const Scene& bench = DefaultScene();
+  EXPECT_EQ(cobot.effects.Summary(), bench.effects.Summary());
+  EXPECT_EQ(cobot.probe.radius_mm, bench.probe.radius_mm);
+  EXPECT_EQ(cobot.load_cell.noise_n, bench.load_cell.noise_n);
+  EXPECT_EQ(cobot.patches[0].model_path, bench.patches[0].model_path);
+}
+
 TEST(Scenes, OverrideSkinSampleSetsTheSeed) {
   Scene s = DefaultScene();
   OverrideSkinSample(s, 42);

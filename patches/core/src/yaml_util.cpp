@@ -195,6 +195,10 @@ std::vector<double> YamlReader::Numbers(const std::string& key, double min, doub
   return out;
 }
 
+void YamlReader::Allow(std::initializer_list<std::string_view> keys) {
+  for (std::string_view k : keys) read_.emplace(k);
+}
+
 void YamlReader::Finish() const {
   if (!node_.IsMap()) return;
   for (auto it = node_.begin(); it != node_.end(); ++it) {

@@ -2,10 +2,9 @@
 #include "ruffini/twin/twin.h"
 #include "ruffini/twin/viscoelastic.h"
 
-#include <filesystem>
-
 #include "ruffini/error.h"
 #include "ruffini/patch/spec_loader.h"
+#include "ruffini/scene_file.h"
 #include "ruffini/yaml_reader.h"
 
 namespace ruffini::twin {
@@ -137,31 +136,19 @@ const ScenePatch& Scene::Patch(const std::string& patch_name) const {
 }
 
 Scene LoadScene(const std::string& path) {
-  YamlReader root = YamlReader::LoadFile(path);
+  // The root reader checks the file's shape and the patches' paths; the twin reads the specs and its own
+  // section, and builds nothing for the robot or safety sections (their parts read them).
+  SceneFile file = LoadSceneFile(path);
   Scene s;
   s.source = path;
-  s.name = root.String("name");
-  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
-  for (YamlReader& p : root.Sequence("patches")) {
-    ScenePatch sp;
-    sp.name = p.String("name");
-    sp.spec_path = (dir / p.String("spec")).lexically_normal().string();
-    if (!std::filesystem::exists(sp.spec_path)) p.Fail("spec", "names a file that does not exist (" + sp.spec_path + ")");
-    if (p.Has("model")) {
-      sp.model_path = (dir / p.String("model")).lexically_normal().string();
-      if (!std::filesystem::exists(sp.model_path)) {
-        p.Fail("model", "names a file that does not exist (" + sp.model_path + ")");
-      }
-    }
-    p.Finish();
-    sp.spec = patch::LoadPatchSpec(sp.spec_path);
-    for (const auto& other : s.patches) {
-      if (other.name == sp.name) p.Fail("name", "is used by two patches; patch names must be unique");
-    }
-    s.patches.push_back(std::move(sp));
+  s.name = file.name;
+  for (const SceneFilePatch& p : file.patches) {
+    s.patches.push_back(ScenePatch{.name = p.name,
+                                   .spec_path = p.spec_path,
+                                   .spec = patch::LoadPatchSpec(p.spec_path),
+                                   .model_path = p.model_path});
   }
-  if (s.patches.empty()) root.Fail("patches", "must list at least one patch");
-  if (auto t = root.MapOr("twin")) {
+  if (auto& t = file.twin) {
     if (auto pr = t->MapOr("probe")) {
       s.probe.shape = pr->Choice("shape", {"sphere", "point"}) == "sphere" ? Probe::Shape::kSphere : Probe::Shape::kPoint;
       s.probe.radius_mm = pr->Number("radius_mm", 0.01, kMaxProbeRadiusMm);
@@ -175,7 +162,6 @@ Scene LoadScene(const std::string& path) {
     if (auto e = t->MapOr("effects")) s.effects = ReadEffects(*e);
     t->Finish();
   }
-  root.Finish();
   return s;
 }
 

@@ -7,8 +7,10 @@
 
 #include <functional>
 #include <optional>
+#include <initializer_list>
 #include <set>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace ruffini {
@@ -41,6 +43,9 @@ class YamlReader {
 
   // Throws naming the first key that was never read: unknown keys are errors, not silently ignored.
   void Finish() const;
+  // Counts these keys as known without reading them, so Finish() accepts them: for a file whose parts are
+  // parsed by different code (a scene's root reader knows every patch key; the robot part reads `mount`).
+  void Allow(std::initializer_list<std::string_view> keys);
 
   // Throws InputError "<file:line:col of key>: '<path.key>' (<value>) <what>".
   [[noreturn]] void Fail(const std::string& key, const std::string& what) const;

@@ -1,6 +1,8 @@
 #pragma once
-// A scene names what exists: the patches (and, later, the robot, mounts and safety zones) and the effects
-// the twin must model. Only what a scene names is built.
+// The twin's view of a scene: the patches (their specs) and the effects the twin must model. The file's shape
+// is the root reader's (ruffini/scene_file.h); a scene's `robot`, `mount`, `region` and `safety` keys are
+// read by ruffini::robot (robot/scene.h) and ruffini::safety (safety/scene.h): the twin builds nothing from
+// them. Only what a scene names is built.
 #include <optional>
 #include <string>
 #include <vector>

@@ -1,0 +1,182 @@
+// The safety part of a scene: config/scenes/cobot.yaml's regions, thresholds and deadlines, and every bad
+// safety key with its message.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+
+#include "ruffini/error.h"
+#include "ruffini/safety/scene.h"
+
+namespace ruffini::safety {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+constexpr std::int64_t kMsNs = 1'000'000;
+const std::string kSpec = RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml";
+const std::string kUrdf = RUFFINI_SOURCE_DIR "/config/robots/srs7.urdf";
+
+TEST(CobotScene, SafetySection) {
+  const Config c = ConfigFromScene(std::string(RUFFINI_SOURCE_DIR "/config/scenes/cobot.yaml"));
+  ASSERT_EQ(c.regions.size(), 2u);
+  EXPECT_EQ(c.regions[0].name, "forearm");
+  EXPECT_EQ(c.regions[1].name, "upper_arm");
+  for (const RegionConfig& r : c.regions) {
+    EXPECT_EQ(r.threshold_n, 1.5f) << r.name;  // a force the skin can reach (it was characterised to 2.5 N)
+    EXPECT_THAT(r.source, HasSubstr("ISO/TS 15066")) << r.name;
+    EXPECT_THAT(r.source, HasSubstr("not checked")) << r.name;
+  }
+  ASSERT_EQ(c.patches.size(), 4u);
+  const char* ids[] = {"forearm_a", "forearm_b", "upper_arm_a", "upper_arm_b"};
+  const char* regions[] = {"forearm", "forearm", "upper_arm", "upper_arm"};
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(c.patches[i].id, ids[i]);
+    EXPECT_EQ(c.patches[i].region, regions[i]);
+    EXPECT_EQ(c.patches[i].silence_deadline_ns, 30 * kMsNs);
+  }
+  EXPECT_TRUE(c.joint_states_required);  // the scene names a robot
+  EXPECT_EQ(c.joint_state_max_age_ns, 50 * kMsNs);
+  EXPECT_EQ(c.healthy_before_reset_ns, 200 * kMsNs);
+  EXPECT_FALSE(c.new_epoch_per_cause);
+  // The policy takes it as it is.
+  const Policy policy(c);
+  EXPECT_EQ(policy.patch_count(), 4u);
+}
+
+TEST(ForearmScene, HasNoSafetySection) {
+  const std::string path = RUFFINI_SOURCE_DIR "/config/scenes/forearm.yaml";
+  try {
+    (void)ConfigFromScene(path);
+    FAIL() << "forearm.yaml has no safety section";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), path + ": 'safety' is missing (a mapping with regions and deadlines expected)");
+  }
+}
+
+class SafetyScene : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::path(::testing::TempDir()) / (std::to_string(::getpid()) + "_ruffini_safety_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  // Two patches (their `region:` lines are 5 and 8), no robot; `safety` starts on line 9 and its first
+  // region on line 11.
+  std::string Write(const std::string& region_a, const std::string& region_b, const std::string& regions,
+                    const std::string& rest = "", const std::string& patch_b_extra = "") const {
+    const std::string path = (dir_ / "s.yaml").string();
+    std::ofstream(path) << "name: t\n"                                              // 1
+                        << "patches:\n"                                             // 2
+                        << "  - name: a\n"                                          // 3
+                        << "    spec: " << kSpec << "\n"                            // 4
+                        << "    region: " << region_a << "\n"                       // 5
+                        << "  - name: b\n"                                          // 6
+                        << "    spec: " << kSpec << "\n"                            // 7
+                        << "    region: " << region_b << "\n" << patch_b_extra      // 8
+                        << "safety:\n"                                              // 9
+                        << "  regions:\n"                                           // 10
+                        << regions                                                  // 11..
+                        << rest;
+    return path;
+  }
+  static std::string Message(const std::string& path) {
+    try {
+      (void)ConfigFromScene(path);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "(no error)";
+  }
+  static constexpr const char* kArm = "    - {name: arm, threshold_n: 2, source: our choice}\n";
+  fs::path dir_;
+};
+
+TEST_F(SafetyScene, DefaultsAndOverrides) {
+  const Config c = ConfigFromScene(Write("arm", "arm", kArm, "  silence_deadline_ms: 12.5\n  new_epoch_per_cause: true\n",
+                                         "    silence_deadline_ms: 40\n"));
+  EXPECT_FALSE(c.joint_states_required);  // no robot
+  ASSERT_EQ(c.patches.size(), 2u);
+  EXPECT_EQ(c.patches[0].silence_deadline_ns, 12'500'000);
+  EXPECT_EQ(c.patches[1].silence_deadline_ns, 40 * kMsNs);
+  EXPECT_EQ(c.healthy_before_reset_ns, Config{}.healthy_before_reset_ns);
+  EXPECT_TRUE(c.new_epoch_per_cause);
+  EXPECT_EQ(c.regions[0].threshold_n, 2.0f);
+  EXPECT_EQ(c.regions[0].source, "our choice");
+}
+
+TEST_F(SafetyScene, UnknownRegion) {
+  const std::string p = Write("arm", "hand", kArm);
+  EXPECT_EQ(Message(p), p + ":8:5: 'patches[1].region' (hand) names no region in safety.regions (regions: arm)");
+}
+
+TEST_F(SafetyScene, NegativeZeroNaNAndHugeThresholds) {
+  const std::string what =
+      " must be a force above 0 N and at most 1000 N (a contact above it stops the robot)";
+  std::string p = Write("arm", "arm", "    - {name: arm, threshold_n: -1, source: x}\n");
+  EXPECT_EQ(Message(p), p + ":11:19: 'safety.regions[0].threshold_n' (-1)" + what);
+  p = Write("arm", "arm", "    - {name: arm, threshold_n: 0, source: x}\n");
+  EXPECT_EQ(Message(p), p + ":11:19: 'safety.regions[0].threshold_n' (0)" + what);
+  p = Write("arm", "arm", "    - {name: arm, threshold_n: 1500, source: x}\n");
+  EXPECT_EQ(Message(p), p + ":11:19: 'safety.regions[0].threshold_n' (1500)" + what);
+  p = Write("arm", "arm", "    - {name: arm, threshold_n: .nan, source: x}\n");
+  EXPECT_EQ(Message(p), p + ":11:19: 'safety.regions[0].threshold_n' (.nan) must be a finite number");
+}
+
+TEST_F(SafetyScene, MissingSource) {
+  const std::string p = Write("arm", "arm", "    - {name: arm, threshold_n: 2}\n");
+  EXPECT_EQ(Message(p), p + ":11:7: 'safety.regions[0].source' is missing: say where the threshold comes from "
+                            "(ISO/TS 15066 values vary between sources, FACTS.md), or why it was chosen");
+}
+
+TEST_F(SafetyScene, DuplicateRegionAndNoRegions) {
+  std::string p = Write("arm", "arm", std::string(kArm) + kArm);
+  EXPECT_EQ(Message(p), p + ":12:8: 'safety.regions[1].name' (arm) is used by two regions; region names must be unique");
+  p = Write("arm", "arm", "    []\n");
+  EXPECT_THAT(Message(p), HasSubstr(":10:3: 'safety.regions' must list at least one body region"));
+}
+
+TEST_F(SafetyScene, BadDeadlinesAndKeys) {
+  std::string p = Write("arm", "arm", kArm, "  silence_deadline_ms: 0\n");
+  EXPECT_EQ(Message(p), p + ":12:3: 'safety.silence_deadline_ms' (0) must lie inside 0.001..60000");
+  p = Write("arm", "arm", kArm, "", "    silence_deadline_ms: -5\n");
+  EXPECT_EQ(Message(p), p + ":9:5: 'patches[1].silence_deadline_ms' (-5) must lie inside 0.001..60000");
+  p = Write("arm", "arm", kArm, "  joint_state_max_age_ms: 50\n");
+  EXPECT_EQ(Message(p), p + ":12:3: 'safety.joint_state_max_age_ms' (50) needs a robot: the scene has no 'robot' "
+                            "section, so no joint states");
+  p = Write("arm", "arm", kArm, "  threshold_n: 5\n");
+  EXPECT_EQ(Message(p), p + ":12:3: 'safety.threshold_n' is not a known key here");
+}
+
+TEST_F(SafetyScene, RegionAndSafetyGoTogether) {
+  // The root reader's presence rules: every patch of a scene with safety has a region, and none without.
+  const std::string path = (dir_ / "s.yaml").string();
+  std::ofstream(path) << "name: t\npatches:\n  - name: a\n    spec: " << kSpec << "\n    region: arm\n";
+  EXPECT_EQ(Message(path), path + ":5:5: 'patches[0].region' (arm) needs a safety section: the scene has no "
+                                  "'safety' section");
+  std::ofstream(path) << "name: t\npatches:\n  - name: a\n    spec: " << kSpec << "\nsafety:\n  regions:\n" << kArm;
+  EXPECT_EQ(Message(path), path + ":3:5: 'patches[0].region' is missing: the scene has a safety section, so every "
+                                  "patch needs a body region");
+}
+
+TEST_F(SafetyScene, WithARobotJointStatesAreRequired) {
+  const std::string path = (dir_ / "s.yaml").string();
+  std::ofstream(path) << "name: t\nrobot: {urdf: " << kUrdf << "}\npatches:\n  - name: a\n    spec: " << kSpec
+                      << "\n    region: arm\n    mount: {link: forearm_link, xyz_m: [0, 0, 0], rpy_rad: [0, 0, 0]}\n"
+                      << "safety:\n  regions:\n" << kArm << "  joint_state_max_age_ms: 20\n";
+  const Config c = ConfigFromScene(path);
+  EXPECT_TRUE(c.joint_states_required);
+  EXPECT_EQ(c.joint_state_max_age_ns, 20 * kMsNs);
+}
+
+}  // namespace
+}  // namespace ruffini::safety
