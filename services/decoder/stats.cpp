@@ -4,28 +4,6 @@
 
 namespace ruffini::decoder {
 
-void AtomicHistogram::ObserveNs(std::int64_t ns) noexcept {
-  if (ns < 0) ns = 0;
-  const double s = static_cast<double>(ns) * 1e-9;
-  std::size_t i = 0;
-  while (i < kBounds.size() && s > kBounds[i]) ++i;
-  counts_[i].fetch_add(1, std::memory_order_relaxed);
-  sum_ns_.fetch_add(static_cast<std::uint64_t>(ns), std::memory_order_relaxed);
-}
-
-void AtomicHistogram::Fill(prometheus::ClientMetric& m) const {
-  std::uint64_t cumulative = 0;
-  m.histogram.bucket.clear();
-  for (std::size_t i = 0; i < kBounds.size(); ++i) {
-    cumulative += counts_[i].load(std::memory_order_relaxed);
-    m.histogram.bucket.push_back({cumulative, kBounds[i]});
-  }
-  cumulative += counts_[kBounds.size()].load(std::memory_order_relaxed);
-  m.histogram.bucket.push_back({cumulative, std::numeric_limits<double>::infinity()});
-  m.histogram.sample_count = cumulative;
-  m.histogram.sample_sum = static_cast<double>(sum_ns_.load(std::memory_order_relaxed)) * 1e-9;
-}
-
 StatsCollectable::StatsCollectable(const Stats& stats, std::string patch,
                                    std::vector<std::pair<std::string, std::string>> info)
     : stats_(stats), patch_(std::move(patch)), info_(std::move(info)) {}

@@ -1,8 +1,7 @@
 #pragma once
 // The decoder service's shared statistics: plain atomics each thread writes with relaxed stores (no lock on
-// the real-time path), and a prometheus-cpp Collectable that turns them into metric families at scrape time.
-// Histograms are binned here into atomic buckets, because prometheus::Histogram::Observe takes a mutex the
-// scrape also takes (FACTS.md), which the decode thread must never wait on.
+// the real-time path), and a prometheus-cpp Collectable that turns them into metric families at scrape time
+// (histograms: service::AtomicHistogram).
 #include <array>
 #include <atomic>
 #include <cstdint>
@@ -15,21 +14,11 @@
 #include "ruffini/decode/pipeline.h"
 #include "ruffini/ingest/hyperion.h"
 #include "ruffini/link/messages.h"
+#include "ruffini/service/atomic_histogram.h"
 
 namespace ruffini::decoder {
 
-// Fixed buckets, seconds; Observe is lock-free (relaxed atomics).
-class AtomicHistogram {
- public:
-  static constexpr std::array<double, 14> kBounds = {1e-6, 2e-6, 5e-6, 1e-5, 2e-5, 5e-5, 1e-4,
-                                                     2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 1e-1};
-  void ObserveNs(std::int64_t ns) noexcept;
-  void Fill(prometheus::ClientMetric& m) const;
-
- private:
-  std::array<std::atomic<std::uint64_t>, kBounds.size() + 1> counts_{};  // last: above the largest bound
-  std::atomic<std::uint64_t> sum_ns_{0};
-};
+using AtomicHistogram = service::AtomicHistogram;
 
 struct Stats {
   // Written by the decode thread (a copy of link::Monitor's health after each step).

@@ -1,0 +1,157 @@
+#pragma once
+// The aggregator's state, without the network: one object owns the patch links, the joint-state history,
+// the body-frame placement of contacts and the safety policy, and runs on an injected clock (every call
+// carries now_ns, Unix ns of the aggregator's clock). The service's gRPC callbacks only enqueue; one loop
+// thread calls these methods (DESIGN.md, "Threads and time"), so a test can replay any sequence.
+//
+// A Connect stream's rules (docs/contracts.md): the first message is a PatchHello with seq 1 naming a scene
+// patch whose spec fingerprint and model SHA-256 are the scene's, and no other live stream holds that patch;
+// otherwise the hello is refused (the stream ends, the patch stays missing). After it, seq rises by exactly 1
+// and the patch id never changes; a break is a protocol error (the stream ends, FAULT). Heartbeats, contacts
+// and faults go to the safety policy (ruffini::safety); contacts are placed in the base frame with the
+// joint state interpolated at the contact's timestamp.
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "ruffini/robot/kinematics.h"
+#include "ruffini/robot/model.h"
+#include "ruffini/robot/mount.h"
+#include "ruffini/safety/policy.h"
+#include "ruffini/v1/aggregator.pb.h"
+
+namespace ruffini::aggregate {
+
+// What the aggregator expects of each scene patch.
+struct PatchExpectation {
+  std::string id;
+  std::string spec_name;
+  std::string spec_fingerprint;
+  std::string model_sha256;      // "": any model trained for the spec
+  std::optional<robot::PatchMount> mount;  // where it sits on the robot (none: not placed)
+};
+
+struct Setup {
+  safety::Config safety;
+  std::vector<PatchExpectation> patches;   // the same ids, in the same order, as safety.patches
+  std::optional<robot::Model> robot;       // none: a scene without a robot (contacts are not placed)
+  std::int64_t max_heartbeat_period_ns = 10'000'000;  // a decoder announcing a slower heartbeat is refused
+  std::int64_t joint_history_ns = 1'000'000'000;      // how much joint-state history is kept for placement
+  std::string instance = "aggregator";
+};
+
+// Joint-state rejections (counted, logged by the service; a rejected state is not used).
+enum class JointRejection : std::uint8_t {
+  kNone = 0,
+  kNoRobot,          // the scene has no robot
+  kWrongCount,       // names / positions do not match the robot's joints
+  kWrongNames,       // a name differs from the robot's joint (in the robot's order)
+  kNotFinite,        // a NaN or infinite position
+  kNotMonotonic,     // t_ns not after the previous state's
+};
+inline constexpr std::size_t kJointRejectionCount = 6;
+std::string_view JointRejectionName(JointRejection r) noexcept;
+
+struct Counters {
+  std::uint64_t messages = 0;
+  std::uint64_t hellos_accepted = 0;
+  std::array<std::uint64_t, 9> hellos_refused{};  // by v1::HelloRefusal
+  std::uint64_t protocol_errors = 0;
+  std::uint64_t contacts = 0;                     // contact messages
+  std::uint64_t contacts_placed = 0;              // placed in the base frame
+  std::array<std::uint64_t, kJointRejectionCount> joint_states{};  // [0]: accepted
+};
+
+class Core {
+ public:
+  // Throws InputError when the setup is inconsistent (patch lists differ, a mount's link is unknown).
+  Core(Setup setup, std::int64_t now_ns);
+
+  // --- Connect streams ---
+  // A new stream; returns its id.
+  int OpenStream(std::int64_t now_ns);
+  struct Reply {
+    std::optional<v1::AggregatorCommand> command;  // to send on the stream
+    bool close = false;                            // end the stream (after the command, if any)
+  };
+  Reply OnPatchMessage(int stream, const v1::PatchMessage& m, std::int64_t now_ns);
+  void CloseStream(int stream, std::int64_t now_ns);
+
+  // --- Joint states (PublishJointStates) ---
+  JointRejection OnJointState(const v1::JointState& js, std::int64_t now_ns);
+
+  // --- ResetStop ---
+  v1::ResetStopResponse OnReset(const v1::ResetStopRequest& r, bool authorized, std::int64_t now_ns);
+
+  // Deadlines (patch silence, joint staleness); call every few ms.
+  void Tick(std::int64_t now_ns);
+  // A periodic publication (the 10 ms heartbeat to subscribers): seq + 1.
+  void Publish(std::int64_t now_ns);
+  void Shutdown(std::int64_t now_ns);
+
+  // --- Outputs ---
+  // The current safety state as sent to subscribers.
+  [[nodiscard]] v1::SafetyState SafetyState() const;
+  // True once after each change of the safety state (the service publishes it at once).
+  bool TakeChanged() noexcept { return std::exchange(changed_, false); }
+  // The body-frame contacts now (one per patch in contact; fusion joins them).
+  [[nodiscard]] v1::ContactSet Contacts(std::int64_t now_ns) const;
+  [[nodiscard]] v1::AggregatorStatus Status(std::int64_t now_ns) const;
+  [[nodiscard]] const Counters& counters() const noexcept { return counters_; }
+  [[nodiscard]] const safety::Counters& safety_counters() const noexcept { return data_.counters(); }
+  [[nodiscard]] const safety::Policy& policy() const noexcept { return policy_; }
+  [[nodiscard]] std::int64_t start_ns() const noexcept { return start_ns_; }
+  // Why the newest protocol error ended its stream (for the service's log).
+  [[nodiscard]] const std::string& last_protocol_error() const noexcept { return last_protocol_error_; }
+  // Frame-to-stop latency of the newest STOP: now_ns when it latched minus the contact frame's t_ns; -1 none.
+  [[nodiscard]] std::int64_t TakeStopLatencyNs() noexcept { return std::exchange(stop_latency_ns_, -1); }
+
+ private:
+  struct Stream {
+    int patch = -1;        // after an accepted hello
+    std::uint64_t seq = 0;
+    bool hello_done = false;
+  };
+  struct PatchLink {
+    int stream = -1;                      // the live stream holding the patch
+    std::int64_t last_seen_ns = 0, last_t_ns = 0, clock_offset_ns = 0;
+    std::uint64_t last_seq = 0;
+    v1::PatchHello hello;
+    v1::Heartbeat heartbeat;
+    v1::PatchFault fault;
+    bool in_contact = false;
+    v1::BodyContact contact;              // the newest contact, placed when possible
+  };
+  struct JointSample {
+    std::int64_t t_ns = 0;
+    std::vector<double> q;
+  };
+
+  Reply Refuse(Stream& s, v1::HelloRefusal reason, const std::string& message, std::int64_t now_ns);
+  Reply ProtocolError(int stream, Stream& s, const std::string& why, std::int64_t now_ns);
+  void Note(const safety::Step& step);
+  bool PlaceContact(int patch, std::int64_t t_ns, const v1::PatchContact& c, v1::BodyContact& out);
+  v1::AggregatorCommand Command(std::int64_t now_ns);
+
+  Setup setup_;
+  safety::Policy policy_;
+  safety::Data data_;
+  std::int64_t start_ns_;
+  std::map<int, Stream> streams_;
+  int next_stream_ = 1;
+  std::vector<PatchLink> links_;
+  std::deque<JointSample> joints_;
+  robot::Data fk_;
+  std::vector<double> q_scratch_;
+  Counters counters_;
+  std::uint64_t command_seq_ = 0;
+  std::uint64_t contact_ids_ = 0;
+  bool changed_ = true;
+  std::int64_t stop_latency_ns_ = -1;
+  std::string last_protocol_error_;
+};
+
+}  // namespace ruffini::aggregate

@@ -1,0 +1,404 @@
+#include "ruffini/aggregate/core.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "ruffini/error.h"
+
+namespace ruffini::aggregate {
+
+std::string_view JointRejectionName(JointRejection r) noexcept {
+  switch (r) {
+    case JointRejection::kNone: return "accepted";
+    case JointRejection::kNoRobot: return "no_robot";
+    case JointRejection::kWrongCount: return "wrong_count";
+    case JointRejection::kWrongNames: return "wrong_names";
+    case JointRejection::kNotFinite: return "not_finite";
+    case JointRejection::kNotMonotonic: return "not_monotonic";
+  }
+  return "unknown";
+}
+
+namespace {
+
+v1::SafetyState::State ToProto(safety::State s) {
+  switch (s) {
+    case safety::State::kClear: return v1::SafetyState::STATE_CLEAR;
+    case safety::State::kStop: return v1::SafetyState::STATE_STOP;
+    case safety::State::kFault: return v1::SafetyState::STATE_FAULT;
+  }
+  return v1::SafetyState::STATE_UNSPECIFIED;
+}
+
+}  // namespace
+
+Core::Core(Setup setup, std::int64_t now_ns)
+    : setup_(std::move(setup)), policy_(setup_.safety), data_(policy_, now_ns), start_ns_(now_ns) {
+  if (setup_.patches.size() != setup_.safety.patches.size()) {
+    throw InputError("aggregator setup: " + std::to_string(setup_.patches.size()) + " patches but " +
+                     std::to_string(setup_.safety.patches.size()) + " in the safety config");
+  }
+  for (std::size_t i = 0; i < setup_.patches.size(); ++i) {
+    if (setup_.patches[i].id != setup_.safety.patches[i].id) {
+      throw InputError("aggregator setup: patch " + std::to_string(i) + " is '" + setup_.patches[i].id +
+                       "' but the safety config names '" + setup_.safety.patches[i].id + "'");
+    }
+    if (setup_.patches[i].mount) {
+      if (!setup_.robot) throw InputError("patch '" + setup_.patches[i].id + "' has a mount but the scene has no robot");
+      robot::ValidateMount(*setup_.robot, *setup_.patches[i].mount, "patch '" + setup_.patches[i].id + "'");
+    }
+  }
+  links_.resize(setup_.patches.size());
+  if (setup_.robot) q_scratch_.resize(setup_.robot->num_dof());
+}
+
+v1::AggregatorCommand Core::Command(std::int64_t now_ns) {
+  v1::AggregatorCommand c;
+  c.set_seq(++command_seq_);
+  c.set_t_ns(now_ns);
+  return c;
+}
+
+void Core::Note(const safety::Step& step) {
+  if (!step.publish) return;
+  changed_ = true;
+  const auto& s = data_.state();
+  if (s.state == safety::State::kStop && s.cause.kind == safety::CauseKind::kContact && s.cause.t_ns > 0) {
+    stop_latency_ns_ = data_.now_ns() - s.cause.t_ns;
+  }
+}
+
+int Core::OpenStream(std::int64_t /*now_ns*/) {
+  const int id = next_stream_++;
+  streams_[id] = Stream{};
+  return id;
+}
+
+Core::Reply Core::Refuse(Stream& s, v1::HelloRefusal reason, const std::string& message, std::int64_t now_ns) {
+  ++counters_.hellos_refused[static_cast<std::size_t>(reason)];
+  Reply r;
+  r.command = Command(now_ns);
+  r.command->mutable_hello_refused()->set_reason(reason);
+  r.command->mutable_hello_refused()->set_message(message);
+  r.close = true;
+  s.hello_done = true;
+  return r;
+}
+
+Core::Reply Core::ProtocolError(int /*stream*/, Stream& s, const std::string& why, std::int64_t now_ns) {
+  ++counters_.protocol_errors;
+  if (s.patch >= 0) Note(policy_.OnProtocolError(data_, policy_.patch_id(s.patch), now_ns));
+  last_protocol_error_ = why;
+  Reply r;
+  r.close = true;
+  return r;
+}
+
+Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int64_t now_ns) {
+  ++counters_.messages;
+  auto it = streams_.find(stream);
+  if (it == streams_.end()) return Reply{std::nullopt, true};
+  Stream& s = it->second;
+
+  if (!s.hello_done) {
+    // The first message: a hello, seq 1, the envelope's id = the scene's patch.
+    if (!m.has_hello() || m.seq() != 1) {
+      return Refuse(s, v1::HELLO_REFUSAL_PROTOCOL_ERROR, "the first message must be a PatchHello with seq 1", now_ns);
+    }
+    const std::int32_t patch = policy_.FindPatch(m.patch_id());
+    if (patch == safety::kNoPatch) {
+      Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
+      return Refuse(s, v1::HELLO_REFUSAL_UNKNOWN_PATCH, "the scene names no patch '" + m.patch_id() + "'", now_ns);
+    }
+    const PatchExpectation& want = setup_.patches[static_cast<std::size_t>(patch)];
+    const v1::PatchHello& h = m.hello();
+    if (h.patch_name() != want.spec_name || h.patch_fingerprint() != want.spec_fingerprint ||
+        h.model_patch_fingerprint() != want.spec_fingerprint) {
+      Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
+      return Refuse(s, v1::HELLO_REFUSAL_SPEC_MISMATCH,
+                    "patch '" + m.patch_id() + "': expected spec '" + want.spec_name + "' (" + want.spec_fingerprint +
+                        "), the decoder has '" + h.patch_name() + "' (" + h.patch_fingerprint() +
+                        ", model trained for " + h.model_patch_fingerprint() + ")",
+                    now_ns);
+    }
+    if (!want.model_sha256.empty() && h.model_sha256() != want.model_sha256) {
+      Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
+      return Refuse(s, v1::HELLO_REFUSAL_MODEL_MISMATCH,
+                    "patch '" + m.patch_id() + "': expected model sha256 " + want.model_sha256 + ", the decoder runs " +
+                        h.model_name() + " (" + h.model_sha256() + ")",
+                    now_ns);
+    }
+    if (h.heartbeat_period_ns() <= 0 || h.heartbeat_period_ns() > setup_.max_heartbeat_period_ns) {
+      Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
+      return Refuse(s, v1::HELLO_REFUSAL_RATE_MISMATCH,
+                    "heartbeat period " + std::to_string(h.heartbeat_period_ns()) + " ns; at most " +
+                        std::to_string(setup_.max_heartbeat_period_ns) + " ns",
+                    now_ns);
+    }
+    PatchLink& link = links_[static_cast<std::size_t>(patch)];
+    if (link.stream >= 0 && link.stream != stream) {
+      // The live stream keeps the patch; the newcomer is refused (and the patch's state is left alone).
+      return Refuse(s, v1::HELLO_REFUSAL_DUPLICATE_PATCH,
+                    "patch '" + m.patch_id() + "' is held by another live stream (" + link.hello.decoder_instance() + ")",
+                    now_ns);
+    }
+    s.hello_done = true;
+    s.patch = patch;
+    s.seq = 1;
+    link = PatchLink{};
+    link.stream = stream;
+    link.hello = h;
+    link.last_seen_ns = now_ns;
+    link.last_seq = 1;
+    ++counters_.hellos_accepted;
+    Note(policy_.OnHelloAccepted(data_, m.patch_id(), now_ns));
+    Reply r;
+    r.command = Command(now_ns);
+    auto* a = r.command->mutable_hello_accepted();
+    a->set_patch_id(m.patch_id());
+    a->set_watchdog_ns(setup_.safety.patches[static_cast<std::size_t>(patch)].silence_deadline_ns);
+    a->set_aggregator_instance(setup_.instance);
+    return r;
+  }
+  if (s.patch < 0) return Reply{std::nullopt, true};  // refused earlier: nothing more is read
+  PatchLink& link = links_[static_cast<std::size_t>(s.patch)];
+  const std::string_view id = policy_.patch_id(s.patch);
+  if (m.seq() != s.seq + 1 || m.patch_id() != id) {
+    return ProtocolError(stream, s, "seq or patch id broken", now_ns);
+  }
+  s.seq = m.seq();
+  link.last_seen_ns = now_ns;
+  link.last_seq = m.seq();
+  if (m.t_ns() != 0) {
+    link.last_t_ns = m.t_ns();
+    link.clock_offset_ns = m.decoder_t_ns() != 0 ? now_ns - m.decoder_t_ns() : 0;
+  }
+  switch (m.body_case()) {
+    case v1::PatchMessage::kHello:
+      link.hello = m.hello();  // a hello resent on request; checked as the first was
+      break;
+    case v1::PatchMessage::kHeartbeat: {
+      link.heartbeat = m.heartbeat();
+      safety::Heartbeat hb;
+      hb.healthy = m.heartbeat().healthy();
+      hb.active_fault = static_cast<safety::PatchFaultCode>(
+          std::clamp<int>(m.heartbeat().active_fault(), 0, static_cast<int>(safety::kPatchFaultCodeCount) - 1));
+      hb.in_contact = m.heartbeat().in_contact();
+      Note(policy_.OnHeartbeat(data_, id, hb, now_ns));
+      break;
+    }
+    case v1::PatchMessage::kContact: {
+      ++counters_.contacts;
+      const v1::PatchContact& c = m.contact();
+      v1::BodyContact body;
+      if (c.onset() || !link.in_contact) body.set_contact_id(++contact_ids_);
+      else body.set_contact_id(link.contact.contact_id());
+      body.set_onset_t_ns(c.onset() || !link.in_contact ? m.t_ns() : link.contact.onset_t_ns());
+      const bool placed = PlaceContact(s.patch, m.t_ns(), c, body);
+      if (placed) ++counters_.contacts_placed;
+      body.set_t_ns(m.t_ns());
+      body.set_force_n(c.force_n());
+      body.set_force_sd_n(c.force_sd_n());
+      body.add_patch_ids(std::string(id));
+      const auto& pc = setup_.safety.patches[static_cast<std::size_t>(s.patch)];
+      body.set_body_region(pc.region);
+      const std::int32_t region = policy_.FindRegion(pc.region);
+      if (region >= 0) body.set_threshold_n(setup_.safety.regions[static_cast<std::size_t>(region)].threshold_n);
+      link.in_contact = !c.released();
+      link.contact = body;
+      safety::Contact sc;
+      sc.force_n = c.force_n();
+      sc.released = c.released();
+      sc.t_ns = m.t_ns();
+      if (placed) sc.p_bc_m = std::array<double, 3>{body.p_bc_m().x(), body.p_bc_m().y(), body.p_bc_m().z()};
+      Note(policy_.OnContact(data_, id, sc, now_ns));
+      break;
+    }
+    case v1::PatchMessage::kFault: {
+      link.fault = m.fault();
+      const int code = m.fault().code();
+      Note(policy_.OnPatchFault(data_, id,
+                                static_cast<safety::PatchFaultCode>(
+                                    code >= 0 && code < static_cast<int>(safety::kPatchFaultCodeCount) ? code : 0),
+                                now_ns));
+      break;
+    }
+    case v1::PatchMessage::BODY_NOT_SET:
+      return ProtocolError(stream, s, "a message without a body", now_ns);
+  }
+  return {};
+}
+
+void Core::CloseStream(int stream, std::int64_t now_ns) {
+  auto it = streams_.find(stream);
+  if (it == streams_.end()) return;
+  const int patch = it->second.patch;
+  streams_.erase(it);
+  if (patch < 0) return;
+  PatchLink& link = links_[static_cast<std::size_t>(patch)];
+  if (link.stream != stream) return;
+  link.stream = -1;
+  link.in_contact = false;
+  Note(policy_.OnDisconnect(data_, policy_.patch_id(patch), now_ns));
+}
+
+JointRejection Core::OnJointState(const v1::JointState& js, std::int64_t now_ns) {
+  auto reject = [&](JointRejection r) {
+    ++counters_.joint_states[static_cast<std::size_t>(r)];
+    return r;
+  };
+  if (!setup_.robot) return reject(JointRejection::kNoRobot);
+  const robot::Model& model = *setup_.robot;
+  const std::size_t n = model.num_dof();
+  if (static_cast<std::size_t>(js.positions_rad_size()) != n || static_cast<std::size_t>(js.names_size()) != n) {
+    return reject(JointRejection::kWrongCount);
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (js.names(static_cast<int>(i)) != model.dof_joint(i).name) return reject(JointRejection::kWrongNames);
+    if (!std::isfinite(js.positions_rad(static_cast<int>(i)))) return reject(JointRejection::kNotFinite);
+  }
+  if (!joints_.empty() && js.t_ns() <= joints_.back().t_ns) return reject(JointRejection::kNotMonotonic);
+  JointSample sample;
+  sample.t_ns = js.t_ns();
+  sample.q.assign(js.positions_rad().begin(), js.positions_rad().end());
+  joints_.push_back(std::move(sample));
+  while (joints_.size() > 2 && joints_.back().t_ns - joints_.front().t_ns > setup_.joint_history_ns) joints_.pop_front();
+  ++counters_.joint_states[0];
+  Note(policy_.OnJointState(data_, now_ns));
+  return JointRejection::kNone;
+}
+
+bool Core::PlaceContact(int patch, std::int64_t t_ns, const v1::PatchContact& c, v1::BodyContact& out) {
+  const PatchExpectation& want = setup_.patches[static_cast<std::size_t>(patch)];
+  if (!want.mount || !setup_.robot || joints_.empty()) return false;
+  const robot::Model& model = *setup_.robot;
+  // The joint state at the contact's time: linear between the two samples around it, else the nearest end.
+  const auto after = std::find_if(joints_.begin(), joints_.end(), [&](const JointSample& j) { return j.t_ns >= t_ns; });
+  if (after == joints_.begin()) {
+    q_scratch_ = after->q;
+  } else if (after == joints_.end()) {
+    q_scratch_ = joints_.back().q;
+  } else {
+    const JointSample& b = *after;
+    const JointSample& a = *(after - 1);
+    const double w = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
+    for (std::size_t i = 0; i < q_scratch_.size(); ++i) q_scratch_[i] = a.q[i] + w * (b.q[i] - a.q[i]);
+  }
+  if (robot::ForwardKinematics(model, q_scratch_, fk_) != robot::FkStatus::kOk) return false;
+  const auto link = model.FindLink(want.mount->link);
+  if (!link) return false;
+  out.set_link(want.mount->link);
+  patch::SurfacePoint sp;
+  bool located = c.located();
+  // An unlocated contact (force only) is placed at the patch's centre (a doubt about where, not whether).
+  sp.y_mm = located ? c.y_mm() : 75.0;
+  sp.r_deg = located ? c.r_deg() : 72.5;
+  const robot::SurfaceInLink s = robot::PatchToLink(*want.mount, sp);
+  const Eigen::Isometry3d& X_BL = fk_.X_BL[*link];
+  const Eigen::Vector3d p = X_BL * s.p_LS_m;
+  const Eigen::Vector3d n = X_BL.linear() * s.n_L;
+  out.mutable_p_bc_m()->set_x(p.x());
+  out.mutable_p_bc_m()->set_y(p.y());
+  out.mutable_p_bc_m()->set_z(p.z());
+  out.mutable_normal_b()->set_x(n.x());
+  out.mutable_normal_b()->set_y(n.y());
+  out.mutable_normal_b()->set_z(n.z());
+  out.set_located(located);
+  return true;
+}
+
+v1::ResetStopResponse Core::OnReset(const v1::ResetStopRequest& r, bool authorized, std::int64_t now_ns) {
+  safety::ResetRequest req;
+  req.stop_epoch = r.stop_epoch();
+  req.authorized = authorized;
+  const safety::ResetResult res = policy_.Reset(data_, req, now_ns);
+  if (res.accepted) changed_ = true;
+  v1::ResetStopResponse out;
+  out.set_accepted(res.accepted);
+  out.set_reason(static_cast<v1::ResetRefusal>(res.reason));
+  out.set_message(safety::Describe(policy_, res));
+  *out.mutable_state() = SafetyState();
+  return out;
+}
+
+void Core::Tick(std::int64_t now_ns) { Note(policy_.Tick(data_, now_ns)); }
+
+void Core::Publish(std::int64_t now_ns) { Note(policy_.Publish(data_, now_ns)); }
+
+void Core::Shutdown(std::int64_t now_ns) { Note(policy_.Shutdown(data_, now_ns)); }
+
+v1::SafetyState Core::SafetyState() const {
+  const safety::SafetyState& s = data_.state();
+  v1::SafetyState out;
+  out.set_state(ToProto(s.state));
+  out.set_stop_epoch(s.stop_epoch);
+  out.set_seq(s.seq);
+  out.set_changed_t_ns(s.changed_t_ns);
+  out.set_published_t_ns(s.published_t_ns);
+  out.set_aggregator_start_t_ns(start_ns_);
+  v1::SafetyCause* c = out.mutable_cause();
+  c->set_kind(static_cast<v1::SafetyCause::Kind>(s.cause.kind));
+  c->set_patch_id(std::string(policy_.patch_id(s.cause.patch)));
+  c->set_body_region(std::string(policy_.region_name(s.cause.region)));
+  if (s.cause.patch >= 0) {
+    const auto& want = setup_.patches[static_cast<std::size_t>(s.cause.patch)];
+    if (want.mount) c->set_link(want.mount->link);
+  }
+  // A NaN force (a doubt) is sent as -1: the wire never carries NaN; the message says what it was.
+  c->set_force_n(std::isfinite(s.cause.force_n) ? s.cause.force_n : -1.0f);
+  c->set_threshold_n(s.cause.threshold_n);
+  if (s.cause.p_bc_m) {
+    c->mutable_p_bc_m()->set_x((*s.cause.p_bc_m)[0]);
+    c->mutable_p_bc_m()->set_y((*s.cause.p_bc_m)[1]);
+    c->mutable_p_bc_m()->set_z((*s.cause.p_bc_m)[2]);
+  }
+  c->set_patch_fault(static_cast<v1::PatchFaultCode>(s.cause.patch_fault));
+  if (s.cause.kind != safety::CauseKind::kNone) c->set_message(safety::Describe(policy_, s.cause));
+  c->set_t_ns(s.cause.t_ns);
+  return out;
+}
+
+v1::ContactSet Core::Contacts(std::int64_t now_ns) const {
+  v1::ContactSet set;
+  set.set_t_ns(now_ns);
+  set.set_published_t_ns(now_ns);
+  set.set_stop_epoch(data_.state().stop_epoch);
+  if (!joints_.empty()) set.set_joint_state_t_ns(joints_.back().t_ns);
+  for (const PatchLink& link : links_) {
+    if (link.stream >= 0 && link.in_contact) *set.add_contacts() = link.contact;
+  }
+  return set;
+}
+
+v1::AggregatorStatus Core::Status(std::int64_t now_ns) const {
+  v1::AggregatorStatus st;
+  st.set_t_ns(now_ns);
+  st.set_aggregator_start_t_ns(start_ns_);
+  *st.mutable_safety() = SafetyState();
+  const auto patch_states = data_.patches();
+  for (std::size_t i = 0; i < links_.size(); ++i) {
+    const PatchLink& l = links_[i];
+    v1::PatchStatus* p = st.add_patches();
+    p->set_patch_id(setup_.patches[i].id);
+    p->set_link_state(static_cast<v1::LinkState>(patch_states[i].link));
+    p->set_last_seen_t_ns(l.last_seen_ns);
+    p->set_last_t_ns(l.last_t_ns);
+    p->set_last_seq(l.last_seq);
+    p->set_clock_offset_ns(l.clock_offset_ns);
+    if (patch_states[i].healthy_since_t_ns) p->set_healthy_since_t_ns(*patch_states[i].healthy_since_t_ns);
+    *p->mutable_hello() = l.hello;
+    *p->mutable_last_heartbeat() = l.heartbeat;
+    *p->mutable_last_fault() = l.fault;
+  }
+  if (!joints_.empty()) {
+    st.set_joint_state_t_ns(joints_.back().t_ns);
+    st.set_joint_state_age_ns(now_ns - joints_.back().t_ns);
+  }
+  if (setup_.robot) {
+    for (std::size_t i = 0; i < setup_.robot->num_dof(); ++i) st.add_joint_names(setup_.robot->dof_joint(i).name);
+  }
+  st.set_aggregator_version("0.1.0");
+  return st;
+}
+
+}  // namespace ruffini::aggregate

@@ -1,0 +1,62 @@
+// ruffini-aggregator: one per robot (server.h). Exit codes: 0 ok (stopped by SIGINT or SIGTERM), 1 bad input
+// (the message names what is wrong), 2 usage. stdout carries one line, the ports ("ports: grpc P metrics P").
+#include <signal.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <string>
+
+#include "ruffini/error.h"
+#include "scene_setup.h"
+#include "server.h"
+
+int main(int argc, char** argv) {
+  spdlog::set_default_logger(spdlog::stderr_color_mt("ruffini-aggregator"));
+  CLI::App app{"ruffini-aggregator: patch contacts -> body-frame contacts and safety stops for one robot"};
+  std::string scene_path, listen = "127.0.0.1:50051", metrics = "127.0.0.1:9465", ports_file;
+  app.add_option("--scene", scene_path, "Scene YAML (robot, patches and mounts, safety regions)")
+      ->required()->check(CLI::ExistingFile);
+  app.add_option("--listen", listen, "gRPC address, HOST:PORT (port 0: pick a free one)")->capture_default_str();
+  app.add_option("--metrics", metrics, "Prometheus metrics address, HOST:PORT (port 0: pick a free one)")
+      ->capture_default_str();
+  app.add_option("--ports-file", ports_file, "Write the chosen ports here ('grpc P' and 'metrics P' lines)");
+  CLI11_PARSE(app, argc, argv);
+
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGINT);
+  sigaddset(&stop_signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+  try {
+    ruffini::aggregator::ServerConfig config;
+    config.listen = ruffini::service::ParseHostPort(listen, "--listen", /*allow_zero=*/true);
+    config.metrics = ruffini::service::ParseHostPort(metrics, "--metrics", /*allow_zero=*/true);
+    ruffini::aggregate::Setup setup = ruffini::aggregator::SetupFromScene(scene_path);
+    spdlog::info("{}", ruffini::aggregator::Describe(setup));
+    spdlog::warn("plaintext gRPC (no TLS yet): every ResetStop caller is treated as an operator");
+    ruffini::aggregator::AggregatorServer server(config, std::move(setup));
+    std::printf("ports: grpc %u metrics %u\n", static_cast<unsigned>(server.port()),
+                static_cast<unsigned>(server.metrics_port()));
+    std::fflush(stdout);
+    if (!ports_file.empty()) {
+      ruffini::service::WriteFileAtomically(ports_file, "grpc " + std::to_string(server.port()) + "\nmetrics " +
+                                                            std::to_string(server.metrics_port()) + "\n");
+    }
+    server.Start();
+    int sig = 0;
+    sigwait(&stop_signals, &sig);
+    spdlog::info("signal {}: sending FAULT to every subscriber and stopping", sig);
+    server.Stop();
+    spdlog::info("stopped");
+    return 0;
+  } catch (const ruffini::InputError& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    spdlog::error("unexpected error: {}", e.what());
+    return 1;
+  }
+}

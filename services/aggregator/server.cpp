@@ -1,0 +1,726 @@
+#include "server.h"
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <prometheus/collectable.h>
+#include <prometheus/metric_family.h>
+#include <prometheus/metric_type.h>
+#include <prometheus/exposer.h>
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <functional>
+#include <future>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <thread>
+
+#include "ruffini/error.h"
+#include "ruffini/service/atomic_histogram.h"
+#include "ruffini/v1/aggregator.grpc.pb.h"
+
+namespace ruffini::aggregator {
+
+namespace {
+
+constexpr const char* kVersion = "0.1.0";
+
+// Shared between a reactor and the loop: the reactor is deleted in OnDone, after which `alive` is false and
+// the loop's calls do nothing. One recursive mutex guards the reactor's state (a reaction may run inline).
+struct Guard {
+  std::recursive_mutex mu;
+  bool alive = true;
+};
+
+// Latest-value slot writer for WatchSafety / WatchContacts.
+template <typename Msg>
+class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
+ public:
+  WatchReactor(grpc::CallbackServerContext* ctx, std::function<void(WatchReactor*)> on_done)
+      : ctx_(ctx), guard_(std::make_shared<Guard>()), on_done_(std::move(on_done)) {}
+
+  std::shared_ptr<Guard> guard() const { return guard_; }
+
+  // Loop thread (guard held by the caller through Offer's own lock).
+  void Offer(const Msg& m, std::int64_t mono_ns) {
+    std::lock_guard lock(guard_->mu);
+    if (!guard_->alive || finishing_) return;
+    if (writing_) {
+      pending_ = m;  // replaces an older pending state: the newest wins (seq and stop_epoch tell what was skipped)
+      return;
+    }
+    current_ = m;
+    writing_ = true;
+    write_started_ns_ = mono_ns;
+    this->StartWrite(&current_);
+  }
+  // A write stuck past the deadline: cancel the call; OnWriteDone(false) / OnDone follow. Returns true when
+  // this subscriber was dropped now.
+  bool CheckStuck(std::int64_t mono_ns, std::int64_t deadline_ns) {
+    std::lock_guard lock(guard_->mu);
+    if (!guard_->alive || !writing_ || dropped_ || mono_ns - write_started_ns_ <= deadline_ns) return false;
+    dropped_ = true;
+    ctx_->TryCancel();
+    return true;
+  }
+  // Ends the stream after the write in flight (if any) with this status.
+  void FinishWith(const grpc::Status& status) {
+    std::lock_guard lock(guard_->mu);
+    if (!guard_->alive || finishing_) return;
+    finishing_ = true;
+    final_ = status;
+    if (!writing_) {
+      if (pending_) {
+        current_ = *pending_;
+        pending_.reset();
+        writing_ = true;
+        this->StartWriteAndFinish(&current_, grpc::WriteOptions(), final_);
+      } else {
+        this->Finish(final_);
+      }
+    }
+  }
+
+  void OnWriteDone(bool ok) override {
+    std::lock_guard lock(guard_->mu);
+    writing_ = false;
+    if (!ok) {
+      if (!finished_) {
+        finished_ = true;
+        this->Finish(grpc::Status(grpc::StatusCode::CANCELLED, "write failed"));
+      }
+      return;
+    }
+    if (pending_) {
+      current_ = *pending_;
+      pending_.reset();
+      writing_ = true;
+      if (finishing_) {
+        finished_ = true;
+        this->StartWriteAndFinish(&current_, grpc::WriteOptions(), final_);
+      } else {
+        this->StartWrite(&current_);
+      }
+    } else if (finishing_ && !finished_) {
+      finished_ = true;
+      this->Finish(final_);
+    }
+  }
+  void OnDone() override {
+    {
+      std::lock_guard lock(guard_->mu);
+      guard_->alive = false;
+    }
+    on_done_(this);
+    delete this;
+  }
+
+ private:
+  grpc::CallbackServerContext* ctx_;
+  std::shared_ptr<Guard> guard_;
+  std::function<void(WatchReactor*)> on_done_;
+  Msg current_;
+  std::optional<Msg> pending_;
+  bool writing_ = false, finishing_ = false, finished_ = false, dropped_ = false;
+  grpc::Status final_;
+  std::int64_t write_started_ns_ = 0;
+};
+
+using SafetyReactor = WatchReactor<v1::SafetyState>;
+using ContactsReactor = WatchReactor<v1::ContactSet>;
+
+struct Stats {
+  std::atomic<int> state{3};
+  std::atomic<std::uint64_t> stop_epoch{1}, seq{0}, stops{0}, faults{0}, resets_accepted{0}, resets_refused{0};
+  std::atomic<std::uint64_t> messages{0}, hellos_accepted{0}, hellos_refused{0}, protocol_errors{0};
+  std::atomic<std::uint64_t> joint_accepted{0}, joint_rejected{0};
+  std::atomic<std::uint64_t> subscriber_drops{0};
+  std::atomic<int> safety_subscribers{0}, contact_subscribers{0};
+  std::vector<std::string> patch_ids, patch_regions;
+  std::unique_ptr<std::atomic<std::uint64_t>[]> contacts;   // contact onsets per patch
+  std::unique_ptr<std::atomic<int>[]> link_state;            // per patch
+  service::AtomicHistogram frame_to_stop;
+};
+
+class StatsCollectable final : public prometheus::Collectable {
+ public:
+  explicit StatsCollectable(const Stats& s) : s_(s) {}
+  std::vector<prometheus::MetricFamily> Collect() const override {
+    using prometheus::ClientMetric;
+    using prometheus::MetricFamily;
+    using prometheus::MetricType;
+    std::vector<MetricFamily> out;
+    auto one = [&](const char* name, const char* help, MetricType type, double v) {
+      MetricFamily f{name, help, type, {}};
+      ClientMetric m;
+      if (type == MetricType::Counter) m.counter.value = v;
+      else m.gauge.value = v;
+      f.metric.push_back(m);
+      out.push_back(std::move(f));
+    };
+    auto u = [](const std::atomic<std::uint64_t>& a) { return static_cast<double>(a.load(std::memory_order_relaxed)); };
+    {
+      MetricFamily f{"ruffini_aggregator_safety_state", "1 for the safety state in force (0 for the others).",
+                     MetricType::Gauge, {}};
+      const int st = s_.state.load();
+      const char* names[] = {"clear", "stop", "fault"};
+      for (int i = 1; i <= 3; ++i) {
+        ClientMetric m;
+        m.label.push_back({"state", names[i - 1]});
+        m.gauge.value = st == i ? 1.0 : 0.0;
+        f.metric.push_back(m);
+      }
+      out.push_back(std::move(f));
+    }
+    one("ruffini_aggregator_stop_epoch", "The current stop_epoch.", MetricType::Gauge, u(s_.stop_epoch));
+    one("ruffini_aggregator_stops_total", "Entries into STOP.", MetricType::Counter, u(s_.stops));
+    one("ruffini_aggregator_faults_total", "Entries into FAULT.", MetricType::Counter, u(s_.faults));
+    {
+      MetricFamily f{"ruffini_aggregator_resets_total", "ResetStop requests by result.", MetricType::Counter, {}};
+      ClientMetric a, r;
+      a.label.push_back({"result", "accepted"});
+      a.counter.value = u(s_.resets_accepted);
+      r.label.push_back({"result", "refused"});
+      r.counter.value = u(s_.resets_refused);
+      f.metric = {a, r};
+      out.push_back(std::move(f));
+    }
+    one("ruffini_aggregator_patch_messages_total", "PatchMessages received.", MetricType::Counter, u(s_.messages));
+    one("ruffini_aggregator_hellos_accepted_total", "Decoder hellos accepted.", MetricType::Counter, u(s_.hellos_accepted));
+    one("ruffini_aggregator_hellos_refused_total", "Decoder hellos refused.", MetricType::Counter, u(s_.hellos_refused));
+    one("ruffini_aggregator_protocol_errors_total", "Connect streams ended for a protocol error.", MetricType::Counter,
+        u(s_.protocol_errors));
+    {
+      MetricFamily f{"ruffini_aggregator_joint_states_total", "Joint states received, by result.", MetricType::Counter, {}};
+      ClientMetric a, r;
+      a.label.push_back({"result", "accepted"});
+      a.counter.value = u(s_.joint_accepted);
+      r.label.push_back({"result", "rejected"});
+      r.counter.value = u(s_.joint_rejected);
+      f.metric = {a, r};
+      out.push_back(std::move(f));
+    }
+    {
+      MetricFamily f{"ruffini_aggregator_contacts_total", "Contact onsets, by patch and body region.",
+                     MetricType::Counter, {}};
+      MetricFamily g{"ruffini_aggregator_patch_link_state",
+                     "Each patch link's state (LinkState number: 1 disconnected, 2 hello pending, 3 refused, 4 healthy, "
+                     "5 unhealthy, 6 silent).",
+                     MetricType::Gauge, {}};
+      for (std::size_t i = 0; i < s_.patch_ids.size(); ++i) {
+        ClientMetric m;
+        m.label = {{"patch", s_.patch_ids[i]}, {"region", s_.patch_regions[i]}};
+        m.counter.value = static_cast<double>(s_.contacts[i].load());
+        f.metric.push_back(m);
+        ClientMetric l;
+        l.label = {{"patch", s_.patch_ids[i]}};
+        l.gauge.value = s_.link_state[i].load();
+        g.metric.push_back(l);
+      }
+      out.push_back(std::move(f));
+      out.push_back(std::move(g));
+    }
+    one("ruffini_aggregator_safety_subscribers", "WatchSafety streams open.", MetricType::Gauge, s_.safety_subscribers.load());
+    one("ruffini_aggregator_contact_subscribers", "WatchContacts streams open.", MetricType::Gauge,
+        s_.contact_subscribers.load());
+    one("ruffini_aggregator_subscriber_drops_total", "Subscribers finished because a write was stuck past its deadline.",
+        MetricType::Counter, u(s_.subscriber_drops));
+    {
+      MetricFamily f{"ruffini_aggregator_frame_to_stop_seconds",
+                     "From the contact frame's interrogator timestamp to the STOP latched here, s.", MetricType::Histogram,
+                     {}};
+      ClientMetric m;
+      s_.frame_to_stop.Fill(m);
+      f.metric.push_back(m);
+      out.push_back(std::move(f));
+    }
+    return out;
+  }
+
+ private:
+  const Stats& s_;
+};
+
+}  // namespace
+
+struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
+  ServerConfig config;
+  std::unique_ptr<aggregate::Core> core;  // owned by the loop thread after Start()
+  std::unique_ptr<grpc::Server> server;
+  int port = 0;
+  std::unique_ptr<prometheus::Exposer> exposer;
+  std::shared_ptr<StatsCollectable> collectable;
+  Stats stats;
+
+  // The event queue: callbacks post, the loop runs.
+  std::mutex mu;
+  std::condition_variable cv;
+  std::deque<std::function<void()>> events;
+  bool stopping = false;
+  std::thread loop;
+
+  // Loop-thread state.
+  std::set<SafetyReactor*> safety_subs;
+  std::set<ContactsReactor*> contact_subs;
+  std::map<SafetyReactor*, std::shared_ptr<Guard>> safety_guards;
+  std::map<ContactsReactor*, std::shared_ptr<Guard>> contact_guards;
+  std::int64_t unix0 = 0, mono0 = 0;
+  std::vector<bool> was_in_contact;
+
+  std::int64_t Now() const { return unix0 + (service::MonoNowNs() - mono0); }
+  void Post(std::function<void()> f) {
+    {
+      std::lock_guard lock(mu);
+      events.push_back(std::move(f));
+    }
+    cv.notify_one();
+  }
+  void Loop();
+  void PublishSafety();
+  void PublishContacts();
+  void CopyStats();
+
+  // --- RPCs (callbacks only enqueue) ---
+  grpc::ServerBidiReactor<v1::PatchMessage, v1::AggregatorCommand>* Connect(grpc::CallbackServerContext* ctx) override;
+  grpc::ServerReadReactor<v1::JointState>* PublishJointStates(grpc::CallbackServerContext* ctx,
+                                                              v1::PublishJointStatesResponse* response) override;
+  grpc::ServerWriteReactor<v1::SafetyState>* WatchSafety(grpc::CallbackServerContext* ctx,
+                                                         const v1::WatchSafetyRequest* request) override;
+  grpc::ServerWriteReactor<v1::ContactSet>* WatchContacts(grpc::CallbackServerContext* ctx,
+                                                          const v1::WatchContactsRequest* request) override;
+  grpc::ServerUnaryReactor* ResetStop(grpc::CallbackServerContext* ctx, const v1::ResetStopRequest* request,
+                                      v1::ResetStopResponse* response) override;
+  grpc::ServerUnaryReactor* GetStatus(grpc::CallbackServerContext* ctx, const v1::GetStatusRequest* request,
+                                      v1::AggregatorStatus* response) override;
+};
+
+namespace {
+
+// A decoder's Connect stream.
+class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1::AggregatorCommand> {
+ public:
+  ConnectReactor(AggregatorServer::Impl* impl, std::string peer)
+      : impl_(impl), guard_(std::make_shared<Guard>()), peer_(std::move(peer)) {
+    auto self = this;
+    auto guard = guard_;
+    impl_->Post([self, guard, impl] {
+      std::lock_guard lock(guard->mu);
+      if (!guard->alive) return;
+      self->stream_ = impl->core->OpenStream(impl->Now());
+    });
+    StartRead(&in_);
+  }
+
+  void OnReadDone(bool ok) override {
+    auto guard = guard_;
+    auto impl = impl_;
+    auto self = this;
+    if (!ok) {
+      // The decoder closed its side (or the call broke): end the stream.
+      impl_->Post([self, guard, impl] {
+        std::lock_guard lock(guard->mu);
+        if (!guard->alive) return;
+        impl->core->CloseStream(self->stream_, impl->Now());
+        self->FinishOnce(grpc::Status::OK);
+      });
+      return;
+    }
+    impl_->Post([self, guard, impl, m = in_] {
+      std::lock_guard lock(guard->mu);
+      if (!guard->alive) return;
+      const auto reply = impl->core->OnPatchMessage(self->stream_, m, impl->Now());
+      if (reply.command) self->Send(*reply.command);
+      if (reply.close) {
+        if (!reply.command) {
+          spdlog::warn("patch stream from {}: protocol error ({}); ending it", self->peer_, impl->core->last_protocol_error());
+        } else if (reply.command->has_hello_refused()) {
+          spdlog::warn("patch stream from {}: hello refused ({}): {}", self->peer_,
+                       v1::HelloRefusal_Name(reply.command->hello_refused().reason()),
+                       reply.command->hello_refused().message());
+        }
+        impl->core->CloseStream(self->stream_, impl->Now());
+        self->FinishOnce(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                      reply.command && reply.command->has_hello_refused()
+                                          ? reply.command->hello_refused().message()
+                                          : "protocol error"));
+      } else if (reply.command && reply.command->has_hello_accepted()) {
+        spdlog::info("patch {} connected from {} ({})", reply.command->hello_accepted().patch_id(), self->peer_,
+                     m.hello().decoder_instance());
+      }
+    });
+    StartRead(&in_);
+  }
+  void OnWriteDone(bool ok) override {
+    std::lock_guard lock(guard_->mu);
+    out_.pop_front();
+    if (!ok) return;
+    if (!out_.empty()) {
+      StartWrite(&out_.front());
+    } else if (finish_pending_ && !finished_) {
+      finished_ = true;
+      Finish(final_);
+    }
+  }
+  void OnDone() override {
+    auto impl = impl_;
+    const int stream = stream_;
+    {
+      std::lock_guard lock(guard_->mu);
+      guard_->alive = false;
+    }
+    impl->Post([impl, stream] { impl->core->CloseStream(stream, impl->Now()); });
+    delete this;
+  }
+
+  // Loop thread, guard held.
+  void Send(const v1::AggregatorCommand& c) {
+    if (finish_pending_) return;
+    out_.push_back(c);
+    if (out_.size() == 1) StartWrite(&out_.front());
+  }
+  void FinishOnce(const grpc::Status& s) {
+    if (finish_pending_) return;
+    finish_pending_ = true;
+    final_ = s;
+    if (out_.empty()) {
+      finished_ = true;
+      Finish(final_);
+    }
+  }
+
+ private:
+  AggregatorServer::Impl* impl_;
+  std::shared_ptr<Guard> guard_;
+  std::string peer_;
+  int stream_ = -1;
+  v1::PatchMessage in_;
+  std::deque<v1::AggregatorCommand> out_;
+  bool finish_pending_ = false, finished_ = false;
+  grpc::Status final_;
+};
+
+// A controller's joint-state stream.
+class JointReactor final : public grpc::ServerReadReactor<v1::JointState> {
+ public:
+  JointReactor(AggregatorServer::Impl* impl, v1::PublishJointStatesResponse* response)
+      : impl_(impl), guard_(std::make_shared<Guard>()), response_(response) {
+    StartRead(&in_);
+  }
+  void OnReadDone(bool ok) override {
+    auto guard = guard_;
+    auto impl = impl_;
+    auto self = this;
+    if (!ok) {
+      // Queued behind every state this stream sent: the counts are complete when the loop gets here.
+      impl_->Post([self, guard] {
+        std::lock_guard lock(guard->mu);
+        if (guard->alive) self->Finish(grpc::Status::OK);
+      });
+      return;
+    }
+    impl_->Post([self, guard, impl, js = in_] {
+      const auto r = impl->core->OnJointState(js, impl->Now());
+      std::lock_guard lock(guard->mu);
+      if (!guard->alive) return;
+      auto* resp = self->response_;
+      resp->set_received(resp->received() + 1);
+      if (r == aggregate::JointRejection::kNone) {
+        resp->set_accepted(resp->accepted() + 1);
+      } else {
+        resp->set_rejected(resp->rejected() + 1);
+        resp->set_last_rejection(std::string(aggregate::JointRejectionName(r)));
+        if (resp->rejected() == 1 || resp->rejected() % 1000 == 0) {
+          spdlog::warn("joint state rejected ({}); {} so far on this stream", aggregate::JointRejectionName(r),
+                       resp->rejected());
+        }
+      }
+    });
+    StartRead(&in_);
+  }
+  void OnDone() override {
+    {
+      std::lock_guard lock(guard_->mu);
+      guard_->alive = false;
+    }
+    delete this;
+  }
+
+ private:
+  AggregatorServer::Impl* impl_;
+  std::shared_ptr<Guard> guard_;
+  v1::PublishJointStatesResponse* response_;
+  v1::JointState in_;
+};
+
+}  // namespace
+
+grpc::ServerBidiReactor<v1::PatchMessage, v1::AggregatorCommand>* AggregatorServer::Impl::Connect(
+    grpc::CallbackServerContext* ctx) {
+  return new ConnectReactor(this, ctx->peer());
+}
+
+grpc::ServerReadReactor<v1::JointState>* AggregatorServer::Impl::PublishJointStates(
+    grpc::CallbackServerContext* /*ctx*/, v1::PublishJointStatesResponse* response) {
+  return new JointReactor(this, response);
+}
+
+grpc::ServerWriteReactor<v1::SafetyState>* AggregatorServer::Impl::WatchSafety(grpc::CallbackServerContext* ctx,
+                                                                               const v1::WatchSafetyRequest* request) {
+  auto* r = new SafetyReactor(ctx, [this](SafetyReactor* gone) {
+    Post([this, gone] {
+      safety_subs.erase(gone);
+      safety_guards.erase(gone);
+      stats.safety_subscribers = static_cast<int>(safety_subs.size());
+    });
+  });
+  const std::string who = request->subscriber().empty() ? ctx->peer() : request->subscriber();
+  auto guard = r->guard();
+  Post([this, r, guard, who] {
+    if (stopping) return;
+    {
+      std::lock_guard lock(guard->mu);
+      if (!guard->alive) return;
+    }
+    safety_subs.insert(r);
+    safety_guards[r] = guard;
+    stats.safety_subscribers = static_cast<int>(safety_subs.size());
+    spdlog::info("safety subscriber {} ({} now)", who, safety_subs.size());
+    r->Offer(core->SafetyState(), service::MonoNowNs());  // the state in force at once
+  });
+  return r;
+}
+
+grpc::ServerWriteReactor<v1::ContactSet>* AggregatorServer::Impl::WatchContacts(grpc::CallbackServerContext* ctx,
+                                                                                const v1::WatchContactsRequest* /*request*/) {
+  auto* r = new ContactsReactor(ctx, [this](ContactsReactor* gone) {
+    Post([this, gone] {
+      contact_subs.erase(gone);
+      contact_guards.erase(gone);
+      stats.contact_subscribers = static_cast<int>(contact_subs.size());
+    });
+  });
+  auto guard = r->guard();
+  Post([this, r, guard] {
+    if (stopping) return;
+    {
+      std::lock_guard lock(guard->mu);
+      if (!guard->alive) return;
+    }
+    contact_subs.insert(r);
+    contact_guards[r] = guard;
+    stats.contact_subscribers = static_cast<int>(contact_subs.size());
+  });
+  return r;
+}
+
+grpc::ServerUnaryReactor* AggregatorServer::Impl::ResetStop(grpc::CallbackServerContext* ctx,
+                                                            const v1::ResetStopRequest* request,
+                                                            v1::ResetStopResponse* response) {
+  auto* reactor = ctx->DefaultReactor();
+  const std::string peer = ctx->peer();
+  Post([this, reactor, request, response, peer] {
+    // No TLS identities yet: every caller is treated as an operator (logged).
+    *response = core->OnReset(*request, /*authorized=*/true, Now());
+    if (response->accepted()) {
+      stats.resets_accepted.fetch_add(1);
+      spdlog::warn("ResetStop accepted from {} ({}): epoch {}", peer, request->operator_name(), request->stop_epoch());
+    } else {
+      stats.resets_refused.fetch_add(1);
+      spdlog::warn("ResetStop refused from {} ({}): {}", peer, request->operator_name(), response->message());
+    }
+    reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* AggregatorServer::Impl::GetStatus(grpc::CallbackServerContext* ctx,
+                                                            const v1::GetStatusRequest* /*request*/,
+                                                            v1::AggregatorStatus* response) {
+  auto* reactor = ctx->DefaultReactor();
+  Post([this, reactor, response] {
+    *response = core->Status(Now());
+    response->set_safety_subscribers(static_cast<std::uint32_t>(safety_subs.size()));
+    response->set_contact_subscribers(static_cast<std::uint32_t>(contact_subs.size()));
+    reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
+}
+
+void AggregatorServer::Impl::PublishSafety() {
+  const v1::SafetyState s = core->SafetyState();
+  const std::int64_t mono = service::MonoNowNs();
+  for (auto* r : safety_subs) r->Offer(s, mono);
+}
+
+void AggregatorServer::Impl::PublishContacts() {
+  const v1::ContactSet c = core->Contacts(Now());
+  const std::int64_t mono = service::MonoNowNs();
+  for (auto* r : contact_subs) r->Offer(c, mono);
+}
+
+void AggregatorServer::Impl::CopyStats() {
+  const v1::SafetyState s = core->SafetyState();
+  stats.state = static_cast<int>(s.state());
+  stats.stop_epoch = s.stop_epoch();
+  stats.seq = s.seq();
+  const auto& sc = core->safety_counters();
+  stats.stops = sc.stops;
+  stats.faults = sc.faults;
+  const auto& c = core->counters();
+  stats.messages = c.messages;
+  stats.hellos_accepted = c.hellos_accepted;
+  std::uint64_t refused = 0;
+  for (auto v : c.hellos_refused) refused += v;
+  stats.hellos_refused = refused;
+  stats.protocol_errors = c.protocol_errors;
+  stats.joint_accepted = c.joint_states[0];
+  std::uint64_t rejected = 0;
+  for (std::size_t i = 1; i < c.joint_states.size(); ++i) rejected += c.joint_states[i];
+  stats.joint_rejected = rejected;
+  const auto status_patches = core->policy().config().patches.size();
+  const auto patches = core->Status(Now());
+  for (std::size_t i = 0; i < status_patches; ++i) {
+    stats.link_state[i] = patches.patches(static_cast<int>(i)).link_state();
+  }
+}
+
+void AggregatorServer::Impl::Loop() {
+  std::int64_t next_heartbeat = Now() + config.heartbeat_period_ns;
+  std::int64_t next_contacts = Now() + config.contacts_period_ns;
+  std::int64_t next_stats = 0;
+  std::deque<std::function<void()>> batch;
+  for (;;) {
+    {
+      std::unique_lock lock(mu);
+      cv.wait_for(lock, std::chrono::milliseconds(1), [&] { return !events.empty() || stopping; });
+      batch.swap(events);
+      if (stopping && batch.empty()) break;
+    }
+    bool contacts_changed = false;
+    const std::uint64_t contacts_before = core->counters().contacts;
+    for (auto& f : batch) f();
+    batch.clear();
+    contacts_changed = core->counters().contacts != contacts_before;
+    const std::int64_t now = Now();
+    core->Tick(now);
+    if (now >= next_heartbeat) {
+      core->Publish(now);
+      next_heartbeat += config.heartbeat_period_ns;
+      if (next_heartbeat <= now) next_heartbeat = now + config.heartbeat_period_ns;
+    }
+    const std::int64_t latency = core->TakeStopLatencyNs();
+    if (latency >= 0) stats.frame_to_stop.ObserveNs(latency);
+    if (core->TakeChanged()) PublishSafety();
+    if (contacts_changed || now >= next_contacts) {
+      PublishContacts();
+      next_contacts = now + config.contacts_period_ns;
+    }
+    const std::int64_t mono = service::MonoNowNs();
+    for (auto* r : safety_subs) {
+      if (r->CheckStuck(mono, config.write_deadline_ns)) {
+        stats.subscriber_drops.fetch_add(1);
+        spdlog::warn("safety subscriber dropped: a write was stuck for more than {} ms",
+                     static_cast<double>(config.write_deadline_ns) / 1e6);
+      }
+    }
+    for (auto* r : contact_subs) {
+      if (r->CheckStuck(mono, config.write_deadline_ns)) stats.subscriber_drops.fetch_add(1);
+    }
+    // Contact onsets per patch (for the contact-rate dashboards).
+    const auto set = core->Contacts(now);
+    std::vector<bool> in_contact(was_in_contact.size(), false);
+    for (const auto& c : set.contacts()) {
+      for (const auto& id : c.patch_ids()) {
+        const auto p = core->policy().FindPatch(id);
+        if (p >= 0) in_contact[static_cast<std::size_t>(p)] = true;
+      }
+    }
+    for (std::size_t i = 0; i < in_contact.size(); ++i) {
+      if (in_contact[i] && !was_in_contact[i]) stats.contacts[i].fetch_add(1);
+    }
+    was_in_contact = in_contact;
+    if (now >= next_stats) {
+      CopyStats();
+      next_stats = now + 5'000'000;
+    }
+  }
+}
+
+AggregatorServer::AggregatorServer(ServerConfig config, aggregate::Setup setup) : impl_(std::make_unique<Impl>()) {
+  Impl& s = *impl_;
+  s.config = config;
+  s.unix0 = service::UnixNowNs();
+  s.mono0 = service::MonoNowNs();
+  const std::size_t n = setup.patches.size();
+  for (const auto& p : setup.safety.patches) {
+    s.stats.patch_ids.push_back(p.id);
+    s.stats.patch_regions.push_back(p.region);
+  }
+  s.stats.contacts = std::make_unique<std::atomic<std::uint64_t>[]>(n);
+  s.stats.link_state = std::make_unique<std::atomic<int>[]>(n);
+  s.was_in_contact.assign(n, false);
+  s.core = std::make_unique<aggregate::Core>(std::move(setup), s.Now());
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(config.listen.str(), grpc::InsecureServerCredentials(), &s.port);
+  builder.RegisterService(&s);
+  s.server = builder.BuildAndStart();
+  if (!s.server || s.port == 0) throw InputError("--listen " + config.listen.str() + ": cannot listen there");
+  try {
+    s.exposer = std::make_unique<prometheus::Exposer>(config.metrics.str());
+  } catch (const std::exception& e) {
+    throw InputError("--metrics " + config.metrics.str() + ": cannot listen (" + e.what() + ")");
+  }
+  s.collectable = std::make_shared<StatsCollectable>(s.stats);
+  s.exposer->RegisterCollectable(s.collectable);
+}
+
+AggregatorServer::~AggregatorServer() { Stop(); }
+
+std::uint16_t AggregatorServer::port() const noexcept { return static_cast<std::uint16_t>(impl_->port); }
+
+std::uint16_t AggregatorServer::metrics_port() const noexcept {
+  const auto ports = impl_->exposer->GetListeningPorts();
+  return ports.empty() ? 0 : static_cast<std::uint16_t>(ports.front());
+}
+
+void AggregatorServer::Start() {
+  Impl& s = *impl_;
+  s.server->GetHealthCheckService()->SetServingStatus(true);
+  s.loop = std::thread([&s] { s.Loop(); });
+}
+
+void AggregatorServer::Stop() {
+  Impl& s = *impl_;
+  if (!s.loop.joinable()) return;
+  s.server->GetHealthCheckService()->SetServingStatus(false);
+  // Last words: FAULT (shutting down) to every subscriber, then every stream finished.
+  std::promise<void> finished;
+  s.Post([&s, &finished] {
+    s.core->Shutdown(s.Now());
+    s.PublishSafety();
+    for (auto* r : s.safety_subs) r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
+    for (auto* r : s.contact_subs) r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
+    finished.set_value();
+  });
+  finished.get_future().wait_for(std::chrono::seconds(1));
+  // Give the last writes a moment, then stop the server (open streams are cancelled at the deadline).
+  s.server->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(500));
+  {
+    std::lock_guard lock(s.mu);
+    s.stopping = true;
+  }
+  s.cv.notify_one();
+  s.loop.join();
+  s.server->Wait();
+}
+
+}  // namespace ruffini::aggregator

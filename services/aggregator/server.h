@@ -1,0 +1,45 @@
+#pragma once
+// ruffini-aggregator: the gRPC callback service around aggregate::Core. Callbacks only enqueue events; one
+// loop thread owns the Core and runs every event in arrival order, ticks every millisecond (patch silence,
+// joint staleness), publishes a SafetyState heartbeat every 10 ms, and hands states to subscribers through
+// per-subscriber latest-value slots (at most one write in flight each). A subscriber whose write is stuck
+// past its deadline is finished with an error, so its controller stops (silence is a stop).
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "ruffini/aggregate/core.h"
+#include "ruffini/service/common.h"
+
+namespace ruffini::aggregator {
+
+struct ServerConfig {
+  service::HostPort listen;             // port 0: pick a free one
+  service::HostPort metrics;            // port 0: pick a free one
+  std::int64_t heartbeat_period_ns = 10'000'000;   // SafetyState heartbeat to every subscriber
+  std::int64_t write_deadline_ns = 50'000'000;     // a subscriber's write stuck longer is finished with an error
+  std::int64_t contacts_period_ns = 20'000'000;    // ContactSet heartbeat
+};
+
+class AggregatorServer {
+ public:
+  // Binds both ports; throws InputError naming the address when it cannot.
+  AggregatorServer(ServerConfig config, aggregate::Setup setup);
+  ~AggregatorServer();
+  AggregatorServer(const AggregatorServer&) = delete;
+  AggregatorServer& operator=(const AggregatorServer&) = delete;
+
+  [[nodiscard]] std::uint16_t port() const noexcept;
+  [[nodiscard]] std::uint16_t metrics_port() const noexcept;
+  void Start();
+  // Publishes FAULT (shutting down) to every subscriber, finishes every stream, stops the server within
+  // about a second.
+  void Stop();
+
+  struct Impl;  // the service's internals (server.cpp); public only so its reactors can name it
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ruffini::aggregator

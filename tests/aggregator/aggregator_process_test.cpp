@@ -1,0 +1,273 @@
+// The whole chain as real processes on 127.0.0.1 (port 0, ports files): ruffini-sim on the cobot scene with a
+// scripted scenario, one ruffini-decoder per patch, ruffini-aggregator; this test is the controller (a
+// WatchSafety subscriber and a 100 Hz joint-state publisher over gRPC). Every wait is a condition with a
+// deadline; every process is stopped by pid.
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "process.h"
+#include "ruffini/v1/aggregator.grpc.pb.h"
+
+namespace {
+
+using namespace std::chrono_literals;
+namespace v1 = ruffini::v1;
+namespace rt = ruffini::testing;
+namespace fs = std::filesystem;
+
+const std::string kSrc = RUFFINI_SOURCE_DIR;
+const std::string kScene = kSrc + "/config/scenes/cobot.yaml";
+const std::string kScenario = kSrc + "/config/scenarios/cobot-demo.yaml";
+const std::vector<std::string> kPatches = {"forearm_a", "forearm_b", "upper_arm_a", "upper_arm_b"};
+
+std::map<std::string, int> ReadPorts(const std::string& path) {
+  std::map<std::string, int> ports;
+  std::ifstream in(path);
+  std::string key;
+  int port = 0;
+  while (in >> key >> port) ports[key] = port;
+  return ports;
+}
+
+// Starts an executable that writes a ports file; waits for `key` in it.
+rt::Process StartWithPorts(std::vector<std::string> args, const std::string& dir, const std::string& key, int& port) {
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  args.push_back("--ports-file");
+  args.push_back(dir + "/ports");
+  rt::Process p(args, dir);
+  EXPECT_TRUE(rt::WaitFor([&] { return ReadPorts(dir + "/ports").count(key) > 0 || !p.Running(); }, 15s));
+  port = ReadPorts(dir + "/ports")[key];
+  EXPECT_GT(port, 0) << p.stderr_text();
+  return p;
+}
+
+struct Seen {
+  v1::SafetyState state;
+  std::int64_t arrival_ns = 0;
+};
+
+std::int64_t UnixNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+// The test's controller: subscribes to WatchSafety, publishes joint states at 100 Hz.
+class Controller {
+ public:
+  explicit Controller(const std::string& address) {
+    channel_ = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+    stub_ = v1::Aggregator::NewStub(channel_);
+    watcher_ = std::thread([this] { Watch(); });
+  }
+  ~Controller() {
+    StopJoints();
+    watch_ctx_.TryCancel();
+    watcher_.join();
+  }
+  void StartJoints(const std::vector<std::string>& names) {
+    joints_ = std::thread([this, names] {
+      grpc::ClientContext ctx;
+      v1::PublishJointStatesResponse resp;
+      auto w = stub_->PublishJointStates(&ctx, &resp);
+      std::uint64_t seq = 0;
+      while (!stop_joints_) {
+        v1::JointState js;
+        for (std::size_t i = 0; i < names.size(); ++i) {
+          js.add_names(names[i]);
+          js.add_positions_rad(0.3 * std::sin(1e-9 * static_cast<double>(UnixNs()) + static_cast<double>(i)));
+        }
+        js.set_t_ns(UnixNs());
+        js.set_seq(++seq);
+        if (!w->Write(js)) break;
+        std::this_thread::sleep_for(10ms);  // the publishing period of a 100 Hz controller, not a wait
+      }
+      w->WritesDone();
+      w->Finish();
+    });
+  }
+  void StopJoints() {
+    stop_joints_ = true;
+    if (joints_.joinable()) joints_.join();
+  }
+  v1::AggregatorStatus Status() {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + 2s);
+    v1::AggregatorStatus s;
+    stub_->GetStatus(&ctx, v1::GetStatusRequest{}, &s);
+    return s;
+  }
+  v1::ResetStopResponse Reset(std::uint64_t epoch) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + 2s);
+    v1::ResetStopRequest r;
+    r.set_stop_epoch(epoch);
+    r.set_operator_name("aggregator_process_test");
+    v1::ResetStopResponse resp;
+    stub_->ResetStop(&ctx, r, &resp);
+    return resp;
+  }
+  std::vector<Seen> Snapshot() {
+    std::lock_guard lock(mu_);
+    return seen_;
+  }
+  bool ended() const { return ended_; }
+  grpc::Status end_status() {
+    std::lock_guard lock(mu_);
+    return end_;
+  }
+
+ private:
+  void Watch() {
+    v1::WatchSafetyRequest req;
+    req.set_subscriber("aggregator_process_test");
+    auto r = stub_->WatchSafety(&watch_ctx_, req);
+    v1::SafetyState s;
+    while (r->Read(&s)) {
+      std::lock_guard lock(mu_);
+      seen_.push_back({s, UnixNs()});
+    }
+    const grpc::Status st = r->Finish();
+    std::lock_guard lock(mu_);
+    end_ = st;
+    ended_ = true;
+  }
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::Aggregator::Stub> stub_;
+  grpc::ClientContext watch_ctx_;
+  std::thread watcher_, joints_;
+  std::atomic<bool> stop_joints_{false}, ended_{false};
+  std::mutex mu_;
+  std::vector<Seen> seen_;
+  grpc::Status end_;
+};
+
+const Seen* Last(const std::vector<Seen>& s) { return s.empty() ? nullptr : &s.back(); }
+
+TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOne) {
+  const std::string base = (fs::current_path() / "aggregator_chain").string();
+  int grpc_port = 0, sim_port = 0;
+  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+                                    "127.0.0.1:0"},
+                                   base + "/aggregator", "grpc", grpc_port);
+  const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
+  Controller controller(address);
+  // Before any decoder: FAULT, epoch 1, cause start-up; heartbeats every 10 ms.
+  ASSERT_TRUE(rt::WaitFor([&] { return controller.Snapshot().size() >= 10; }, 5s)) << agg.stderr_text();
+  {
+    const auto seen = controller.Snapshot();
+    EXPECT_EQ(seen.front().state.state(), v1::SafetyState::STATE_FAULT);
+    EXPECT_EQ(seen.front().state.stop_epoch(), 1u);
+    EXPECT_EQ(seen.front().state.cause().kind(), v1::SafetyCause::KIND_STARTUP);
+    for (std::size_t i = 1; i < seen.size(); ++i) EXPECT_GT(seen[i].state.seq(), seen[i - 1].state.seq());
+  }
+  const auto status = controller.Status();
+  ASSERT_EQ(status.joint_names_size(), 7);
+  controller.StartJoints({status.joint_names().begin(), status.joint_names().end()});
+
+  rt::Process sim = StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kScenario, "--rate-hz", "1000",
+                                    "--command-port", "0", "--stream-port", "0"},
+                                   base + "/sim", "stream", sim_port);
+  std::vector<rt::Process> decoders;
+  for (const auto& p : kPatches) {
+    int metrics = 0;
+    decoders.push_back(StartWithPorts({RUFFINI_DECODER_EXE, "--scene", kScene, "--patch", p, "--interrogator",
+                                       "127.0.0.1:" + std::to_string(sim_port), "--aggregator", address, "--metrics",
+                                       "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100"},
+                                      base + "/decoder_" + p, "metrics", metrics));
+  }
+  // A reset is refused while a patch is missing or not yet healthy; once every patch has been healthy for
+  // 200 ms, a reset naming the current epoch clears.
+  const auto refused = controller.Reset(1);
+  EXPECT_FALSE(refused.accepted());
+  bool cleared = false;
+  ASSERT_TRUE(rt::WaitFor([&] {
+    const auto seen = controller.Snapshot();
+    if (seen.empty()) return false;
+    const auto r = controller.Reset(seen.back().state.stop_epoch());
+    cleared = r.accepted();
+    return cleared;
+  }, 10s, 100ms)) << agg.stderr_text();
+  ASSERT_TRUE(rt::WaitFor([&] {
+    const auto* l = Last(controller.Snapshot());
+    return l && l->state.state() == v1::SafetyState::STATE_CLEAR;
+  }, 2s));
+  const std::int64_t cleared_at = UnixNs();
+  // A wrong epoch is refused and changes nothing.
+  const auto wrong = controller.Reset(999);
+  EXPECT_FALSE(wrong.accepted());
+  EXPECT_EQ(wrong.state().state(), v1::SafetyState::STATE_CLEAR);
+
+  // The scenario: a light touch at 4 s (no stop), a hard one on the upper arm at 7 s (STOP).
+  ASSERT_TRUE(rt::WaitFor([&] {
+    const auto* l = Last(controller.Snapshot());
+    return l && l->state.state() != v1::SafetyState::STATE_CLEAR;
+  }, 15s)) << agg.stderr_text();
+  const auto seen = controller.Snapshot();
+  const Seen& stop = seen.back();
+  const std::int64_t clear_ms = (stop.arrival_ns - cleared_at) / 1'000'000;
+  std::printf("[ metric ] CLEAR for %lld ms, then %s (cause %s, patch %s, force %.2f N > %.2f N): %s\n",
+              static_cast<long long>(clear_ms), v1::SafetyState::State_Name(stop.state.state()).c_str(),
+              v1::SafetyCause::Kind_Name(stop.state.cause().kind()).c_str(), stop.state.cause().patch_id().c_str(),
+              static_cast<double>(stop.state.cause().force_n()), static_cast<double>(stop.state.cause().threshold_n()),
+              stop.state.cause().message().c_str());
+  EXPECT_EQ(stop.state.state(), v1::SafetyState::STATE_STOP) << stop.state.DebugString();
+  EXPECT_EQ(stop.state.cause().kind(), v1::SafetyCause::KIND_CONTACT);
+  EXPECT_EQ(stop.state.cause().patch_id(), "upper_arm_a");
+  EXPECT_EQ(stop.state.cause().link(), "upper_arm_link");
+  EXPECT_GT(stop.state.cause().force_n(), 1.5f);
+  EXPECT_GT(stop.state.stop_epoch(), 1u);
+  // The stop came after the light touch (4 s to 6.1 s of the scenario) had passed without one.
+  EXPECT_GT(clear_ms, 1500);
+  // The body-frame position is set (the joint states place it).
+  const auto& p = stop.state.cause().p_bc_m();
+  EXPECT_GT(std::abs(p.x()) + std::abs(p.y()) + std::abs(p.z()), 0.1);
+  // Frame-to-stop: the cause's frame time vs the STOP's arrival here.
+  const double latency_ms = static_cast<double>(stop.arrival_ns - stop.state.cause().t_ns()) / 1e6;
+  std::printf("[ metric ] frame-to-stop at the controller: %.3f ms\n", latency_ms);
+  EXPECT_GT(latency_ms, 0.0);
+  // STOP latches: it stays STOP (never CLEAR) after the touch is released.
+  const std::int64_t stop_seen = UnixNs();
+  ASSERT_TRUE(rt::WaitFor([&] { return Last(controller.Snapshot())->arrival_ns > stop_seen + 2'000'000'000; }, 5s));
+  for (const auto& s : controller.Snapshot()) {
+    if (s.arrival_ns >= stop.arrival_ns) {
+      EXPECT_NE(s.state.state(), v1::SafetyState::STATE_CLEAR);
+    }
+  }
+
+  // A decoder dies: FAULT.
+  decoders[3].Signal(SIGKILL);
+  EXPECT_TRUE(rt::WaitFor([&] {
+    const auto* l = Last(controller.Snapshot());
+    return l && l->state.state() == v1::SafetyState::STATE_FAULT;
+  }, 5s));
+
+  // The aggregator shuts down: FAULT (shutting down), the stream ends, exit 0.
+  EXPECT_EQ(agg.Stop(), 0);
+  EXPECT_FALSE(agg.killed());
+  EXPECT_TRUE(rt::WaitFor([&] { return controller.ended(); }, 3s));
+  const auto last = controller.Snapshot().back();
+  EXPECT_EQ(last.state.state(), v1::SafetyState::STATE_FAULT);
+  EXPECT_EQ(last.state.cause().kind(), v1::SafetyCause::KIND_SHUTTING_DOWN);
+  controller.StopJoints();
+}
+
+TEST(AggregatorProcess, ASceneWithoutSafetyIsAClearError) {
+  const std::string dir = (fs::current_path() / "aggregator_nosafety").string();
+  fs::create_directories(dir);
+  rt::Process p({RUFFINI_AGGREGATOR_EXE, "--scene", kSrc + "/config/scenes/forearm.yaml", "--listen", "127.0.0.1:0",
+                 "--metrics", "127.0.0.1:0"},
+                dir);
+  EXPECT_EQ(p.WaitExit(10s), 1);
+  EXPECT_NE(p.stderr_text().find("no `safety:` section"), std::string::npos) << p.stderr_text();
+}
+
+}  // namespace
