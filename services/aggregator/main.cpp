@@ -22,6 +22,13 @@ int main(int argc, char** argv) {
   app.add_option("--metrics", metrics, "Prometheus metrics address, HOST:PORT (port 0: pick a free one)")
       ->capture_default_str();
   app.add_option("--ports-file", ports_file, "Write the chosen ports here ('grpc P' and 'metrics P' lines)");
+  double silence_ms = 0, joint_age_ms = 0;
+  app.add_option("--patch-silence-ms", silence_ms,
+                 "Override every patch's silence deadline (default: the scene's `safety:` values); for slow links "
+                 "or loaded test machines, never shorter than 3 heartbeats")
+      ->check(CLI::Range(30.0, 10000.0));
+  app.add_option("--joint-max-age-ms", joint_age_ms, "Override the scene's joint-state max age")
+      ->check(CLI::Range(1.0, 10000.0));
   CLI11_PARSE(app, argc, argv);
 
   sigset_t stop_signals;
@@ -35,6 +42,14 @@ int main(int argc, char** argv) {
     config.listen = ruffini::service::ParseHostPort(listen, "--listen", /*allow_zero=*/true);
     config.metrics = ruffini::service::ParseHostPort(metrics, "--metrics", /*allow_zero=*/true);
     ruffini::aggregate::Setup setup = ruffini::aggregator::SetupFromScene(scene_path);
+    if (silence_ms > 0) {
+      for (auto& p : setup.safety.patches) p.silence_deadline_ns = static_cast<std::int64_t>(silence_ms * 1e6);
+      spdlog::warn("--patch-silence-ms {}: the scene's patch silence deadlines are overridden", silence_ms);
+    }
+    if (joint_age_ms > 0) {
+      setup.safety.joint_state_max_age_ns = static_cast<std::int64_t>(joint_age_ms * 1e6);
+      spdlog::warn("--joint-max-age-ms {}: the scene's joint-state max age is overridden", joint_age_ms);
+    }
     spdlog::info("{}", ruffini::aggregator::Describe(setup));
     spdlog::warn("plaintext gRPC (no TLS yet): every ResetStop caller is treated as an operator");
     ruffini::aggregator::AggregatorServer server(config, std::move(setup));

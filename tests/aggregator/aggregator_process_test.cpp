@@ -9,6 +9,7 @@
 #include <chrono>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -150,13 +151,19 @@ class Controller {
   grpc::Status end_;
 };
 
-const Seen* Last(const std::vector<Seen>& s) { return s.empty() ? nullptr : &s.back(); }
+// The newest state seen (a copy: snapshots are temporaries).
+std::optional<Seen> Last(const std::vector<Seen>& s) {
+  if (s.empty()) return std::nullopt;
+  return s.back();
+}
 
 TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOne) {
   const std::string base = (fs::current_path() / "aggregator_chain").string();
   int grpc_port = 0, sim_port = 0;
+  // Deadlines widened (200 ms silence, 200 ms joint-state age) so that a loaded 2-core CI machine does not
+  // fault a healthy patch; the 30 ms deadlines of the scene are tested on an injected clock (safety tests).
   rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
-                                    "127.0.0.1:0"},
+                                    "127.0.0.1:0", "--patch-silence-ms", "200", "--joint-max-age-ms", "200"},
                                    base + "/aggregator", "grpc", grpc_port);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
   Controller controller(address);
@@ -197,7 +204,7 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
     return cleared;
   }, 10s, 100ms)) << agg.stderr_text();
   ASSERT_TRUE(rt::WaitFor([&] {
-    const auto* l = Last(controller.Snapshot());
+    const auto l = Last(controller.Snapshot());
     return l && l->state.state() == v1::SafetyState::STATE_CLEAR;
   }, 2s));
   const std::int64_t cleared_at = UnixNs();
@@ -206,9 +213,9 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   EXPECT_FALSE(wrong.accepted());
   EXPECT_EQ(wrong.state().state(), v1::SafetyState::STATE_CLEAR);
 
-  // The scenario: a light touch at 4 s (no stop), a hard one on the upper arm at 7 s (STOP).
+  // The scenario: a light touch at 4 s (no stop), a hard one on the forearm seam at 7 s (STOP).
   ASSERT_TRUE(rt::WaitFor([&] {
-    const auto* l = Last(controller.Snapshot());
+    const auto l = Last(controller.Snapshot());
     return l && l->state.state() != v1::SafetyState::STATE_CLEAR;
   }, 15s)) << agg.stderr_text();
   const auto seen = controller.Snapshot();
@@ -221,8 +228,10 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
               stop.state.cause().message().c_str());
   EXPECT_EQ(stop.state.state(), v1::SafetyState::STATE_STOP) << stop.state.DebugString();
   EXPECT_EQ(stop.state.cause().kind(), v1::SafetyCause::KIND_CONTACT);
-  EXPECT_EQ(stop.state.cause().patch_id(), "upper_arm_a");
-  EXPECT_EQ(stop.state.cause().link(), "upper_arm_link");
+  EXPECT_TRUE(stop.state.cause().patch_id() == "forearm_a" || stop.state.cause().patch_id() == "forearm_b")
+      << stop.state.cause().patch_id();
+  EXPECT_EQ(stop.state.cause().link(), "forearm_link");
+  EXPECT_EQ(stop.state.cause().body_region(), "forearm");
   EXPECT_GT(stop.state.cause().force_n(), 1.5f);
   EXPECT_GT(stop.state.stop_epoch(), 1u);
   // The stop came after the light touch (4 s to 6.1 s of the scenario) had passed without one.
@@ -246,7 +255,7 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   // A decoder dies: FAULT.
   decoders[3].Signal(SIGKILL);
   EXPECT_TRUE(rt::WaitFor([&] {
-    const auto* l = Last(controller.Snapshot());
+    const auto l = Last(controller.Snapshot());
     return l && l->state.state() == v1::SafetyState::STATE_FAULT;
   }, 5s));
 

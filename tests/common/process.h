@@ -3,6 +3,7 @@
 // files, wait on conditions with a deadline (never a bare sleep), and always stop it by pid (SIGTERM, then
 // SIGKILL after a timeout) and reap it. Header-only; POSIX.
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -42,6 +43,8 @@ class Process {
     const std::string out = dir_ + "/stdout", err = dir_ + "/stderr";
     pid_ = fork();
     if (pid_ == 0) {
+      // If the test dies (a crash, a kill), its children die with it instead of running on.
+      prctl(PR_SET_PDEATHSIG, SIGKILL);
       if (!freopen(out.c_str(), "w", stdout) || !freopen(err.c_str(), "w", stderr)) _exit(126);
       std::vector<char*> argv;
       for (auto& a : args) argv.push_back(a.data());

@@ -98,6 +98,7 @@ class MonitorTest : public ::testing::Test {
   link::MonitorConfig Config() {
     link::MonitorConfig c;
     c.sample_rate_hz = 1000.0;
+    c.silence_deadline_ns = 3 * kMs;  // explicit: the rules below are written for 3 ms
     return c;
   }
   // Connects at t and feeds n frames 1 ms apart from serial s0; returns the time after the last one.
@@ -116,8 +117,13 @@ class MonitorTest : public ::testing::Test {
 };
 
 TEST_F(MonitorTest, DefaultsComeFromTheRate) {
-  const auto c = link::Resolved(Config());
-  EXPECT_EQ(c.silence_deadline_ns, 3 * kMs);
+  link::MonitorConfig d;
+  d.sample_rate_hz = 1000.0;
+  const auto c = link::Resolved(d);
+  EXPECT_EQ(c.silence_deadline_ns, 5 * kMs);  // 3 frame periods (3 ms at 1 kHz), at least 5 ms
+  link::MonitorConfig slow500;
+  slow500.sample_rate_hz = 500.0;
+  EXPECT_EQ(link::Resolved(slow500).silence_deadline_ns, 6 * kMs);
   EXPECT_EQ(c.reject_fault_frames, 20);
   link::MonitorConfig slow;
   slow.sample_rate_hz = 100.0;
