@@ -42,8 +42,9 @@ struct ServiceBenchOptions {
 struct ThroughputRow {
   std::string config;      // decoder choice (paper-float, ...) or a stage ("codec only", ...)
   std::string stage;       // what the timed loop does
-  std::vector<double> frames_per_s;  // one per repeat
-  double median_fps = 0.0, best_fps = 0.0;
+  std::vector<double> frames_per_s;      // one per repeat, wall time
+  std::vector<double> frames_per_cpu_s;  // one per repeat, the thread's CPU time
+  double median_fps = 0.0, best_fps = 0.0, median_cpu_fps = 0.0;
   std::uint64_t messages = 0, contact_messages = 0, heartbeats = 0, faults = 0, bytes_serialized = 0;
 };
 struct ThroughputResult {
@@ -75,6 +76,8 @@ struct EndToEndRun {
   std::uint64_t serial_span = 0;     // last - first interrogator serial of the window's contact messages
   std::uint64_t messages_dropped = 0, serial_gaps = 0;  // the last heartbeat's counters (cumulative)
   double decoder_cpu_pct = 0.0, sim_cpu_pct = 0.0;      // % of one core over the window
+  // The decoder's CPU by thread name (its own threads keep the process name; gRPC names its threads).
+  std::map<std::string, double> decoder_threads_cpu_pct;
   double capture_wait_s = 0.0;       // decoder start -> first healthy heartbeat
   std::string sim_write_lag;         // the sim's own log line at shutdown (the whole run)
   int sim_exit = -1, decoder_exit = -1;

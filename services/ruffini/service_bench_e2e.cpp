@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <cctype>
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <cstring>
@@ -132,6 +133,25 @@ std::optional<std::uint64_t> CpuTicks(pid_t pid) {
     if (i == 15) stime = std::stoull(field);
   }
   return utime + stime;
+}
+
+// utime + stime summed by thread name (comm) over /proc/<pid>/task: where a process's CPU goes.
+std::map<std::string, std::uint64_t> ThreadTicks(pid_t pid) {
+  std::map<std::string, std::uint64_t> by_name;
+  std::error_code ec;
+  for (const auto& task : fs::directory_iterator("/proc/" + std::to_string(pid) + "/task", ec)) {
+    const std::string text = Slurp((task.path() / "stat").string());
+    const auto open = text.find('('), close = text.rfind(')');
+    if (open == std::string::npos || close == std::string::npos || close < open) continue;
+    std::istringstream in(text.substr(close + 1));
+    std::string field;
+    std::uint64_t ticks = 0;
+    for (int i = 3; i <= 15 && in >> field; ++i) {
+      if (i == 14 || i == 15) ticks += std::stoull(field);
+    }
+    by_name[text.substr(open + 1, close - open - 1)] += ticks;
+  }
+  return by_name;
 }
 
 struct Record {
@@ -302,11 +322,13 @@ EndToEndRun RunEndToEnd(const ServiceBenchOptions& o, double rate_hz, const std:
       std::to_string(run.capture_wait_s) + " s; warm-up, then a " + std::to_string(o.seconds) + " s window");
 
   std::this_thread::sleep_for(std::chrono::duration<double>(o.warmup_s));
+  const auto dec_threads0 = ThreadTicks(decoder.pid());
   const auto dec0 = CpuTicks(decoder.pid()), sim0 = CpuTicks(sim.pid());
   const auto t0 = Clock::now();
   const std::int64_t open_ns = UnixNs();
   std::this_thread::sleep_until(t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.seconds)));
   const auto dec1 = CpuTicks(decoder.pid()), sim1 = CpuTicks(sim.pid());
+  const auto dec_threads1 = ThreadTicks(decoder.pid());
   const auto t1 = Clock::now();
   const std::int64_t close_ns = UnixNs();
   run.window_s = std::chrono::duration<double>(t1 - t0).count();
@@ -317,6 +339,11 @@ EndToEndRun RunEndToEnd(const ServiceBenchOptions& o, double rate_hz, const std:
   const double tick_s = 1.0 / static_cast<double>(sysconf(_SC_CLK_TCK));
   run.decoder_cpu_pct = 100.0 * static_cast<double>(*dec1 - *dec0) * tick_s / run.window_s;
   run.sim_cpu_pct = 100.0 * static_cast<double>(*sim1 - *sim0) * tick_s / run.window_s;
+  for (const auto& [name, ticks] : dec_threads1) {
+    const auto before = dec_threads0.find(name);
+    const std::uint64_t start = before == dec_threads0.end() ? 0 : std::min(before->second, ticks);
+    run.decoder_threads_cpu_pct[name] = 100.0 * static_cast<double>(ticks - start) * tick_s / run.window_s;
+  }
 
   // Decoder first (it sends its shutting_down fault to the aggregator), then the sim (it logs its write lag).
   run.decoder_exit = decoder.Stop(milliseconds(5000));
