@@ -1,6 +1,7 @@
 #include "service.h"
 
 #include <grpcpp/grpcpp.h>
+#include <pthread.h>
 #include <prometheus/exposer.h>
 #include <spdlog/spdlog.h>
 
@@ -579,6 +580,11 @@ void DecoderService::Start() {
   s.decode_thread = std::thread([&s] { s.DecodeLoop(); });
   s.publish_thread = std::thread([&s] { s.PublishLoop(); });
   s.ingest_thread = std::thread([&s] { s.ingest->Run(); });
+  // Named (at most 15 characters), so top, perf and /proc/<pid>/task tell the three apart (ruffini
+  // bench-service reports the CPU of each).
+  pthread_setname_np(s.decode_thread.native_handle(), "dec-decode");
+  pthread_setname_np(s.publish_thread.native_handle(), "dec-publish");
+  pthread_setname_np(s.ingest_thread.native_handle(), "dec-ingest");
 }
 
 void DecoderService::Stop() {

@@ -7,5 +7,6 @@ namespace ruffini::cli {
 void RegisterTwinCommands(CLI::App& app);
 void RegisterDecodeCommands(CLI::App& app);
 void RegisterBenchCommand(CLI::App& app);
+void RegisterBenchServiceCommand(CLI::App& app);
 
 }  // namespace ruffini::cli

@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
   ruffini::cli::RegisterTwinCommands(app);
   ruffini::cli::RegisterDecodeCommands(app);
   ruffini::cli::RegisterBenchCommand(app);
+  ruffini::cli::RegisterBenchServiceCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
