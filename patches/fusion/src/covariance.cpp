@@ -35,8 +35,8 @@ CovarianceStatus Decompose(const Eigen::Matrix3d& P_in, double min_var, double m
   const Eigen::Matrix3d& V = eig.eigenvectors();
   P = V * lambda.asDiagonal() * V.transpose();
   P_inv = V * lambda.cwiseInverse().asDiagonal() * V.transpose();
-  P = 0.5 * (P + P.transpose());
-  P_inv = 0.5 * (P_inv + P_inv.transpose());
+  P = (0.5 * (P + P.transpose())).eval();  // eval: P appears on both sides (Eigen aliasing)
+  P_inv = (0.5 * (P_inv + P_inv.transpose())).eval();
   return CovarianceStatus::kOk;
 }
 
@@ -91,26 +91,36 @@ CovarianceStatus CovarianceIntersection(const Estimate& a, const Estimate& b, Es
       f2 = TraceOfInverse(A, B, w2);
     }
   }
-  const double w_mid = 0.5 * (lo + hi);
-  const double f_mid = TraceOfInverse(A, B, w_mid);
+  double w_mid = 0.5 * (lo + hi);
+  double f_mid = TraceOfInverse(A, B, w_mid);
   const double f_a = Pa.trace();  // w = 1
   const double f_b = Pb.trace();  // w = 0
-  // The ends win ties: they return an input exactly.
-  if (f_a <= f_mid && f_a <= f_b) {
-    out = {a.x, Pa};
-    if (w_out) *w_out = 1.0;
-    return CovarianceStatus::kOk;
+  const double tie = 1e-12 * std::min(f_a, f_b);
+  if (f_mid >= std::min(f_a, f_b) - tie) {
+    // No interior w does clearly better than the better end. If the ends tie as well, the convex tr P(w)
+    // is flat on [0, 1] (equal at both ends and nowhere lower): every w is optimal and w = 1/2 treats a
+    // and b alike. Otherwise the better end wins and returns its input exactly.
+    if (std::abs(f_a - f_b) <= tie) {
+      w_mid = 0.5;
+      f_mid = TraceOfInverse(A, B, w_mid);
+    } else if (f_a < f_b) {
+      out = {a.x, Pa};
+      if (w_out) *w_out = 1.0;
+      return CovarianceStatus::kOk;
+    } else {
+      out = {b.x, Pb};
+      if (w_out) *w_out = 0.0;
+      return CovarianceStatus::kOk;
+    }
   }
-  if (f_b <= f_mid) {
-    out = {b.x, Pb};
-    if (w_out) *w_out = 0.0;
-    return CovarianceStatus::kOk;
-  }
+  if (!std::isfinite(f_mid)) return CovarianceStatus::kNotCovariance;  // unreachable: A, B are PD
   const Eigen::Matrix3d info = w_mid * A + (1.0 - w_mid) * B;
   const Eigen::LLT<Eigen::Matrix3d> llt(info);
   if (llt.info() != Eigen::Success) return CovarianceStatus::kNotCovariance;  // unreachable: f_mid was finite
   Eigen::Matrix3d P = llt.solve(Eigen::Matrix3d::Identity());
-  const Eigen::Vector3d x = llt.solve(w_mid * (A * a.x) + (1.0 - w_mid) * (B * b.x));
+  // x = P (w A a + (1 - w) B b) = a + (1 - w) P B (b - a): the same, but a correction to a, so two nearly
+  // equal estimates do not lose digits to two large, nearly cancelling information-weighted sums.
+  const Eigen::Vector3d x = a.x + llt.solve((1.0 - w_mid) * (B * (b.x - a.x)));
   if (Regularize(P) != CovarianceStatus::kOk || !x.allFinite()) return CovarianceStatus::kNotFinite;
   out = {x, P};
   if (w_out) *w_out = w_mid;
