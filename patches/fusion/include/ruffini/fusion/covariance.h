@@ -42,8 +42,11 @@ enum class CovarianceStatus : std::uint8_t {
 // with w in [0, 1] minimising trace P. Both covariances are first regularised (Regularize, library bounds).
 // tr P(w) is convex in w (matrix inversion is operator convex on positive-definite matrices and the
 // argument is affine in w), so a fixed golden-section search (kCiIterations, bracket below 1e-10) finds the
-// minimum; both ends are also tried and win ties, and an end returns that input exactly (w = 1: a, w = 0: b).
-// Identical inputs return that estimate exactly (w = 0.5). *w_out (optional) receives w, the weight on a.
+// minimum. The ends are compared with it: when no interior w is better by more than 1e-12 (relative), the
+// better end is taken and returns that input exactly (w = 1: a, w = 0: b); when the two ends tie too, tr P
+// is flat on [0, 1] and w = 1/2 (equal covariances give the midpoint). Identical inputs return that
+// estimate exactly (w = 1/2). The mean is computed as a + (1 - w) P Pb^-1 (b - a), algebraically the formula
+// above but without its cancellation when a and b are close. *w_out (optional) receives w, the weight on a.
 // The result is consistent whatever the correlation of a and b, its P is symmetric positive definite and
 // tr P <= min(tr Pa, tr Pb) (of the regularised inputs).
 inline constexpr int kCiIterations = 50;
