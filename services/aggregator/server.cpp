@@ -633,15 +633,9 @@ void AggregatorServer::Impl::Loop() {
       if (r->CheckStuck(mono, config.write_deadline_ns)) stats.subscriber_drops.fetch_add(1);
     }
     // Contact onsets per patch (for the contact-rate dashboards).
-    const auto set = core->Contacts(now);
     std::vector<bool> in_contact(was_in_contact.size(), false);
-    for (const auto& c : set.contacts()) {
-      for (const auto& id : c.patch_ids()) {
-        const auto p = core->policy().FindPatch(id);
-        if (p >= 0) in_contact[static_cast<std::size_t>(p)] = true;
-      }
-    }
     for (std::size_t i = 0; i < in_contact.size(); ++i) {
+      in_contact[i] = core->in_contact(i);
       if (in_contact[i] && !was_in_contact[i]) stats.contacts[i].fetch_add(1);
     }
     was_in_contact = in_contact;

@@ -8,5 +8,6 @@ void RegisterTwinCommands(CLI::App& app);
 void RegisterDecodeCommands(CLI::App& app);
 void RegisterBenchCommand(CLI::App& app);
 void RegisterBenchServiceCommand(CLI::App& app);
+void RegisterDemoCommand(CLI::App& app);
 
 }  // namespace ruffini::cli

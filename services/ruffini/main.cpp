@@ -19,8 +19,11 @@ int main(int argc, char** argv) {
   ruffini::cli::RegisterDecodeCommands(app);
   ruffini::cli::RegisterBenchCommand(app);
   ruffini::cli::RegisterBenchServiceCommand(app);
+  ruffini::cli::RegisterDemoCommand(app);
   try {
     app.parse(argc, argv);
+  } catch (const CLI::RuntimeError& e) {
+    return e.get_exit_code();  // a command's own non-zero status (demo: 3 = an expectation failed)
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   } catch (const ruffini::InputError& e) {

@@ -26,6 +26,7 @@
 
 #include "ruffini/error.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
+#include "ruffini/service/child.h"
 #include "service_bench.h"
 
 extern char** environ;
@@ -42,83 +43,9 @@ std::int64_t UnixNs() {
       .count();
 }
 
-std::string Slurp(const std::string& path) {
-  std::ifstream in(path);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-// "key P" lines of a ports file (written atomically by the services).
-std::map<std::string, int> ReadPorts(const std::string& path) {
-  std::map<std::string, int> ports;
-  std::ifstream in(path);
-  std::string key;
-  int port = 0;
-  while (in >> key >> port) ports[key] = port;
-  return ports;
-}
-
-// A child process (posix_spawn: nothing runs between fork and exec in this gRPC-threaded process), stdout and
-// stderr in files of `dir`.
-class Child {
- public:
-  Child(const std::vector<std::string>& args, const std::string& dir) : dir_(dir) {
-    fs::create_directories(dir_);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    const std::string out = dir_ + "/stdout", err = dir_ + "/stderr";
-    posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    std::vector<std::string> copy = args;
-    std::vector<char*> argv;
-    for (auto& a : copy) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    const int rc = posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    if (rc != 0) throw InputError(args[0] + ": cannot start (" + std::strerror(rc) + ")");
-  }
-  Child(const Child&) = delete;
-  Child& operator=(const Child&) = delete;
-  ~Child() { Stop(milliseconds(2000)); }
-
-  [[nodiscard]] pid_t pid() const noexcept { return pid_; }
-  [[nodiscard]] std::string stderr_text() const { return Slurp(dir_ + "/stderr"); }
-  [[nodiscard]] bool killed() const noexcept { return killed_; }
-
-  bool Running() {
-    if (pid_ <= 0) return false;
-    int status = 0;
-    if (waitpid(pid_, &status, WNOHANG) == pid_) {
-      Record(status);
-      return false;
-    }
-    return true;
-  }
-  // SIGTERM, then SIGKILL after `grace`; the exit status (-1: killed by a signal).
-  int Stop(milliseconds grace) {
-    if (pid_ <= 0) return exit_;
-    kill(pid_, SIGTERM);
-    const auto deadline = Clock::now() + grace;
-    while (Running() && Clock::now() < deadline) std::this_thread::sleep_for(milliseconds(5));
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      int status = 0;
-      waitpid(pid_, &status, 0);
-      killed_ = true;
-      Record(status);
-    }
-    return exit_;
-  }
-
- private:
-  void Record(int status) {
-    exit_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    pid_ = -1;
-  }
-  std::string dir_;
-  pid_t pid_ = -1;
-  int exit_ = -1;
-  bool killed_ = false;
-};
+using service::Child;
+using service::ReadPorts;
+using service::Slurp;
 
 // utime + stime of a process, in clock ticks (fields 14 and 15 of /proc/<pid>/stat); nullopt when gone.
 std::optional<std::uint64_t> CpuTicks(pid_t pid) {

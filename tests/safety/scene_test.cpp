@@ -42,7 +42,7 @@ TEST(CobotScene, SafetySection) {
   EXPECT_TRUE(c.joint_states_required);  // the scene names a robot
   EXPECT_EQ(c.joint_state_max_age_ns, 50 * kMsNs);
   EXPECT_EQ(c.healthy_before_reset_ns, 200 * kMsNs);
-  EXPECT_FALSE(c.new_epoch_per_cause);
+  EXPECT_TRUE(c.new_epoch_per_cause);  // the default: the contract's one epoch per cause
   // The policy takes it as it is.
   const Policy policy(c);
   EXPECT_EQ(policy.patch_count(), 4u);
@@ -102,14 +102,14 @@ class SafetyScene : public ::testing::Test {
 };
 
 TEST_F(SafetyScene, DefaultsAndOverrides) {
-  const Config c = ConfigFromScene(Write("arm", "arm", kArm, "  silence_deadline_ms: 12.5\n  new_epoch_per_cause: true\n",
+  const Config c = ConfigFromScene(Write("arm", "arm", kArm, "  silence_deadline_ms: 12.5\n  new_epoch_per_cause: false\n",
                                          "    silence_deadline_ms: 40\n"));
   EXPECT_FALSE(c.joint_states_required);  // no robot
   ASSERT_EQ(c.patches.size(), 2u);
   EXPECT_EQ(c.patches[0].silence_deadline_ns, 12'500'000);
   EXPECT_EQ(c.patches[1].silence_deadline_ns, 40 * kMsNs);
   EXPECT_EQ(c.healthy_before_reset_ns, Config{}.healthy_before_reset_ns);
-  EXPECT_TRUE(c.new_epoch_per_cause);
+  EXPECT_FALSE(c.new_epoch_per_cause);
   EXPECT_EQ(c.regions[0].threshold_n, 2.0f);
   EXPECT_EQ(c.regions[0].source, "our choice");
 }

@@ -49,7 +49,19 @@ Core::Core(Setup setup, std::int64_t now_ns)
     }
   }
   links_.resize(setup_.patches.size());
-  if (setup_.robot) q_scratch_.resize(setup_.robot->num_dof());
+  if (setup_.robot) {
+    q_scratch_.resize(setup_.robot->num_dof());
+    fusion::FusionConfig fc;
+    for (const auto& p : setup_.patches) {
+      fusion::FusionPatch fp;
+      fp.id = p.id;
+      if (p.mount) fp.mount = *p.mount;
+      fc.patches.push_back(fp);
+    }
+    fuser_.emplace(*setup_.robot, std::move(fc));
+    fusion_data_ = std::make_unique<fusion::FusionData>();
+    fusion_inputs_.reserve(setup_.patches.size());
+  }
 }
 
 v1::AggregatorCommand Core::Command(std::int64_t now_ns) {
@@ -206,6 +218,7 @@ Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int
       if (region >= 0) body.set_threshold_n(setup_.safety.regions[static_cast<std::size_t>(region)].threshold_n);
       link.in_contact = !c.released();
       link.contact = body;
+      link.surface = c;
       safety::Contact sc;
       sc.force_n = c.force_n();
       sc.released = c.released();
@@ -268,22 +281,26 @@ JointRejection Core::OnJointState(const v1::JointState& js, std::int64_t now_ns)
   return JointRejection::kNone;
 }
 
-bool Core::PlaceContact(int patch, std::int64_t t_ns, const v1::PatchContact& c, v1::BodyContact& out) {
-  const PatchExpectation& want = setup_.patches[static_cast<std::size_t>(patch)];
-  if (!want.mount || !setup_.robot || joints_.empty()) return false;
-  const robot::Model& model = *setup_.robot;
-  // The joint state at the contact's time: linear between the two samples around it, else the nearest end.
+void Core::JointsAt(std::int64_t t_ns, std::vector<double>& q) const {
+  // Linear between the two samples around t_ns, else the nearest end.
   const auto after = std::find_if(joints_.begin(), joints_.end(), [&](const JointSample& j) { return j.t_ns >= t_ns; });
   if (after == joints_.begin()) {
-    q_scratch_ = after->q;
+    q = after->q;
   } else if (after == joints_.end()) {
-    q_scratch_ = joints_.back().q;
+    q = joints_.back().q;
   } else {
     const JointSample& b = *after;
     const JointSample& a = *(after - 1);
     const double w = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
-    for (std::size_t i = 0; i < q_scratch_.size(); ++i) q_scratch_[i] = a.q[i] + w * (b.q[i] - a.q[i]);
+    for (std::size_t i = 0; i < q.size(); ++i) q[i] = a.q[i] + w * (b.q[i] - a.q[i]);
   }
+}
+
+bool Core::PlaceContact(int patch, std::int64_t t_ns, const v1::PatchContact& c, v1::BodyContact& out) {
+  const PatchExpectation& want = setup_.patches[static_cast<std::size_t>(patch)];
+  if (!want.mount || !setup_.robot || joints_.empty()) return false;
+  const robot::Model& model = *setup_.robot;
+  JointsAt(t_ns, q_scratch_);
   if (robot::ForwardKinematics(model, q_scratch_, fk_) != robot::FkStatus::kOk) return false;
   const auto link = model.FindLink(want.mount->link);
   if (!link) return false;
@@ -358,14 +375,85 @@ v1::SafetyState Core::SafetyState() const {
   return out;
 }
 
-v1::ContactSet Core::Contacts(std::int64_t now_ns) const {
+v1::ContactSet Core::Contacts(std::int64_t now_ns) {
   v1::ContactSet set;
   set.set_t_ns(now_ns);
   set.set_published_t_ns(now_ns);
   set.set_stop_epoch(data_.state().stop_epoch);
   if (!joints_.empty()) set.set_joint_state_t_ns(joints_.back().t_ns);
+  // One joint state for the fusion: the one at the newest contact frame's time (the patches' frames lie within
+  // a frame period of each other).
+  std::int64_t t_fuse = 0;
   for (const PatchLink& link : links_) {
-    if (link.stream >= 0 && link.in_contact) *set.add_contacts() = link.contact;
+    if (link.stream >= 0 && link.in_contact) t_fuse = std::max(t_fuse, link.contact.t_ns());
+  }
+  bool can_fuse = fuser_ && !joints_.empty();
+  if (can_fuse) {
+    JointsAt(t_fuse, q_scratch_);
+    can_fuse = robot::ForwardKinematics(*setup_.robot, q_scratch_, fk_latest_) == robot::FkStatus::kOk;
+  }
+  if (!can_fuse) {
+    for (const PatchLink& link : links_) {
+      if (link.stream >= 0 && link.in_contact) *set.add_contacts() = link.contact;
+    }
+    return set;
+  }
+  fusion_inputs_.clear();
+  for (std::size_t i = 0; i < links_.size(); ++i) {
+    const PatchLink& link = links_[i];
+    if (link.stream < 0 || !link.in_contact) continue;
+    const v1::PatchContact& c = link.surface;
+    fusion::PatchInput in;
+    in.patch = i;
+    in.contact.force_n = c.force_n();
+    in.contact.force_sd_n = c.force_sd_n();
+    in.contact.located = c.located();
+    in.contact.y_mm = c.y_mm();
+    in.contact.r_deg = c.r_deg();
+    in.contact.cov_yy_mm2 = c.cov_yy_mm2();
+    in.contact.cov_ys_mm2 = c.cov_yr_mm2();
+    in.contact.cov_ss_mm2 = c.cov_rr_mm2();
+    in.contact.uncertainty_calibrated = c.uncertainty_calibrated();
+    fusion_inputs_.push_back(in);
+  }
+  fuser_->Update(fusion_inputs_, std::span<const Eigen::Isometry3d>(fk_latest_.X_BL.data(), fk_latest_.X_BL.size()),
+                 *fusion_data_);
+  for (const fusion::BodyContact& f : fusion_data_->contacts()) {
+    v1::BodyContact* b = set.add_contacts();
+    b->set_link(setup_.robot->link(f.link).name);
+    b->mutable_p_bc_m()->set_x(f.p_BC_m.x());
+    b->mutable_p_bc_m()->set_y(f.p_BC_m.y());
+    b->mutable_p_bc_m()->set_z(f.p_BC_m.z());
+    b->mutable_normal_b()->set_x(f.n_B.x());
+    b->mutable_normal_b()->set_y(f.n_B.y());
+    b->mutable_normal_b()->set_z(f.n_B.z());
+    b->set_force_n(static_cast<float>(f.force_n));
+    b->set_force_sd_n(static_cast<float>(std::sqrt(std::max(0.0, f.force_var_n2))));
+    auto* cov = b->mutable_cov_p_bc_m2();
+    cov->set_xx(f.cov_p_BC_m2(0, 0));
+    cov->set_xy(f.cov_p_BC_m2(0, 1));
+    cov->set_xz(f.cov_p_BC_m2(0, 2));
+    cov->set_yy(f.cov_p_BC_m2(1, 1));
+    cov->set_yz(f.cov_p_BC_m2(1, 2));
+    cov->set_zz(f.cov_p_BC_m2(2, 2));
+    b->set_located(f.located);
+    std::uint64_t id = 0;
+    std::int64_t onset = 0, t = 0;
+    for (std::size_t i = 0; i < links_.size(); ++i) {
+      if (!f.HasPatch(i)) continue;
+      b->add_patch_ids(setup_.patches[i].id);
+      const v1::BodyContact& own = links_[i].contact;
+      if (id == 0 || own.contact_id() < id) id = own.contact_id();
+      if (onset == 0 || own.onset_t_ns() < onset) onset = own.onset_t_ns();
+      t = std::max(t, own.t_ns());
+      if (b->body_region().empty()) {
+        b->set_body_region(own.body_region());
+        b->set_threshold_n(own.threshold_n());
+      }
+    }
+    b->set_contact_id(id);
+    b->set_onset_t_ns(onset);
+    b->set_t_ns(t);
   }
   return set;
 }

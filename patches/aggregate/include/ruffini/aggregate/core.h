@@ -13,10 +13,12 @@
 #include <cstdint>
 #include <deque>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "ruffini/fusion/fuser.h"
 #include "ruffini/robot/kinematics.h"
 #include "ruffini/robot/model.h"
 #include "ruffini/robot/mount.h"
@@ -97,10 +99,17 @@ class Core {
   [[nodiscard]] v1::SafetyState SafetyState() const;
   // True once after each change of the safety state (the service publishes it at once).
   bool TakeChanged() noexcept { return std::exchange(changed_, false); }
-  // The body-frame contacts now (one per patch in contact; fusion joins them).
-  [[nodiscard]] v1::ContactSet Contacts(std::int64_t now_ns) const;
+  // The body-frame contacts now: every patch in contact, lifted into the base frame with the newest joint
+  // state and fused across patches on the same or adjacent links (ruffini::fusion: a touch straddling a seam
+  // is one contact, forces summed). Without a robot: one unplaced contact per patch.
+  [[nodiscard]] v1::ContactSet Contacts(std::int64_t now_ns);
+  [[nodiscard]] const fusion::FusionCounters* fusion_counters() const noexcept {
+    return fuser_ ? &fusion_data_->counters : nullptr;
+  }
   [[nodiscard]] v1::AggregatorStatus Status(std::int64_t now_ns) const;
   [[nodiscard]] const Counters& counters() const noexcept { return counters_; }
+  // Whether patch i (scene order) is in contact now.
+  [[nodiscard]] bool in_contact(std::size_t i) const noexcept { return links_[i].stream >= 0 && links_[i].in_contact; }
   [[nodiscard]] const safety::Counters& safety_counters() const noexcept { return data_.counters(); }
   [[nodiscard]] const safety::Policy& policy() const noexcept { return policy_; }
   [[nodiscard]] std::int64_t start_ns() const noexcept { return start_ns_; }
@@ -124,6 +133,7 @@ class Core {
     v1::PatchFault fault;
     bool in_contact = false;
     v1::BodyContact contact;              // the newest contact, placed when possible
+    v1::PatchContact surface;             // the newest contact as the decoder sent it (patch frame)
   };
   struct JointSample {
     std::int64_t t_ns = 0;
@@ -133,6 +143,7 @@ class Core {
   Reply Refuse(Stream& s, v1::HelloRefusal reason, const std::string& message, std::int64_t now_ns);
   Reply ProtocolError(int stream, Stream& s, const std::string& why, std::int64_t now_ns);
   void Note(const safety::Step& step);
+  void JointsAt(std::int64_t t_ns, std::vector<double>& q) const;
   bool PlaceContact(int patch, std::int64_t t_ns, const v1::PatchContact& c, v1::BodyContact& out);
   v1::AggregatorCommand Command(std::int64_t now_ns);
 
@@ -145,6 +156,10 @@ class Core {
   std::vector<PatchLink> links_;
   std::deque<JointSample> joints_;
   robot::Data fk_;
+  std::optional<fusion::Fuser> fuser_;
+  std::unique_ptr<fusion::FusionData> fusion_data_;  // fixed-size (about 29 kB): on the heap once
+  std::vector<fusion::PatchInput> fusion_inputs_;
+  robot::Data fk_latest_;
   std::vector<double> q_scratch_;
   Counters counters_;
   std::uint64_t command_seq_ = 0;

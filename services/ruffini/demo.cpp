@@ -1,0 +1,542 @@
+#include "demo.h"
+
+#include <grpcpp/grpcpp.h>
+#include <signal.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include "ruffini/error.h"
+#include "ruffini/plot/svg.h"
+#include "ruffini/robot/kinematics.h"
+#include "ruffini/robot/scene.h"
+#include "ruffini/scene_file.h"
+#include "ruffini/service/child.h"
+#include "ruffini/service/common.h"
+#include "ruffini/v1/aggregator.grpc.pb.h"
+
+namespace ruffini::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using service::Child;
+using Clock = std::chrono::steady_clock;
+
+struct SafetyRecord {
+  v1::SafetyState state;
+  std::int64_t arrival_ns = 0;
+};
+struct ContactRecord {
+  std::string patch;
+  double force_n = 0;
+  std::int64_t t_ns = 0, arrival_ns = 0;
+  bool located = false;
+  double x = 0, y = 0, z = 0;
+};
+
+// The demo's own subscriber: WatchSafety and WatchContacts, recorded with arrival times.
+class Observer {
+ public:
+  explicit Observer(const std::string& address) {
+    grpc::ChannelArguments args;
+    args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
+    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
+    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
+    channel_ = grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+    stub_ = v1::Aggregator::NewStub(channel_);
+    safety_ = std::thread([this] {
+      v1::WatchSafetyRequest req;
+      req.set_subscriber("ruffini demo");
+      auto r = stub_->WatchSafety(&safety_ctx_, req);
+      v1::SafetyState s;
+      while (r->Read(&s)) {
+        std::lock_guard lock(mu_);
+        safety_log_.push_back({s, service::UnixNowNs()});
+      }
+      r->Finish();
+      safety_ended_ = true;
+    });
+    contacts_ = std::thread([this] {
+      v1::WatchContactsRequest req;
+      req.set_subscriber("ruffini demo");
+      auto r = stub_->WatchContacts(&contacts_ctx_, req);
+      v1::ContactSet set;
+      while (r->Read(&set)) {
+        const std::int64_t now = service::UnixNowNs();
+        std::lock_guard lock(mu_);
+        for (const auto& c : set.contacts()) {
+          const std::string patch = c.patch_ids_size() > 0 ? c.patch_ids(0) : "";
+          const auto key = std::make_pair(patch, c.t_ns());
+          if (!seen_.insert(key).second) continue;
+          contact_log_.push_back({patch, c.force_n(), c.t_ns(), now, c.located(), c.p_bc_m().x(), c.p_bc_m().y(),
+                                  c.p_bc_m().z()});
+        }
+      }
+      r->Finish();
+    });
+  }
+  ~Observer() { Stop(); }
+  void Stop() {
+    safety_ctx_.TryCancel();
+    contacts_ctx_.TryCancel();
+    if (safety_.joinable()) safety_.join();
+    if (contacts_.joinable()) contacts_.join();
+  }
+  std::vector<SafetyRecord> Safety() {
+    std::lock_guard lock(mu_);
+    return safety_log_;
+  }
+  std::vector<ContactRecord> Contacts() {
+    std::lock_guard lock(mu_);
+    return contact_log_;
+  }
+  std::optional<SafetyRecord> Latest() {
+    std::lock_guard lock(mu_);
+    if (safety_log_.empty()) return std::nullopt;
+    return safety_log_.back();
+  }
+  bool safety_ended() const { return safety_ended_; }
+  v1::AggregatorStatus Status() {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + 1s);
+    v1::AggregatorStatus s;
+    stub_->GetStatus(&ctx, v1::GetStatusRequest{}, &s);
+    return s;
+  }
+  v1::ResetStopResponse Reset(std::uint64_t epoch) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + 1s);
+    v1::ResetStopRequest r;
+    r.set_stop_epoch(epoch);
+    r.set_operator_name("ruffini demo");
+    r.set_operator_note("scripted reset");
+    v1::ResetStopResponse resp;
+    stub_->ResetStop(&ctx, r, &resp);
+    return resp;
+  }
+
+ private:
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::Aggregator::Stub> stub_;
+  grpc::ClientContext safety_ctx_, contacts_ctx_;
+  std::thread safety_, contacts_;
+  std::mutex mu_;
+  std::vector<SafetyRecord> safety_log_;
+  std::vector<ContactRecord> contact_log_;
+  std::set<std::pair<std::string, std::int64_t>> seen_;
+  std::atomic<bool> safety_ended_{false};
+};
+
+struct Event {
+  std::string name, expected;
+  double t_s = 0;  // when it was checked, s after the sim started
+  bool pass = false;
+  std::string observed;
+};
+
+std::string Fmt(const char* f, double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+
+bool WaitUntil(const std::function<bool()>& cond, std::chrono::milliseconds timeout,
+               std::chrono::milliseconds poll = 2ms) {
+  const auto deadline = Clock::now() + timeout;
+  for (;;) {
+    if (cond()) return true;
+    if (Clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(poll);
+  }
+}
+
+const char* StateName(v1::SafetyState::State s) {
+  switch (s) {
+    case v1::SafetyState::STATE_CLEAR: return "CLEAR";
+    case v1::SafetyState::STATE_STOP: return "STOP";
+    case v1::SafetyState::STATE_FAULT: return "FAULT";
+    default: return "UNSPECIFIED";
+  }
+}
+
+}  // namespace
+
+DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::string&)>& log) {
+  for (const char* exe : {"ruffini-sim", "ruffini-decoder", "ruffini-aggregator", "ruffini-controller"}) {
+    if (!fs::exists(fs::path(o.bin_dir) / exe)) {
+      throw InputError(std::string(exe) + " is not next to this executable (" + o.bin_dir +
+                       "); build every target (cmake --workflow --preset release)");
+    }
+  }
+  const SceneFile scene = LoadSceneFile(o.scene_path);
+  if (!scene.robot || !scene.safety) {
+    throw InputError(o.scene_path + ": the demo needs a scene with a robot and a safety section (e.g. "
+                     "config/scenes/cobot.yaml)");
+  }
+  std::vector<std::string> patches;
+  for (const auto& p : scene.patches) patches.push_back(p.name);
+  if (patches.size() < 2) throw InputError(o.scene_path + ": the demo needs at least two patches");
+  const std::string killed_patch = patches.back();
+  const fs::path out = o.out_dir;
+  const fs::path run = out / "logs";
+  fs::create_directories(run);
+  auto exe = [&](const char* name) { return (fs::path(o.bin_dir) / name).string(); };
+  const std::string rate = std::to_string(static_cast<int>(o.rate_hz));
+
+  // --- Start-up ---------------------------------------------------------------------------------------
+  log("starting ruffini-aggregator (" + o.scene_path + ")");
+  Child aggregator({exe("ruffini-aggregator"), "--scene", o.scene_path, "--listen", "127.0.0.1:0", "--metrics",
+                    "127.0.0.1:0", "--ports-file", (run / "aggregator" / "ports").string()},
+                   (run / "aggregator").string());
+  const int grpc_port = aggregator.WaitPort((run / "aggregator" / "ports").string(), "grpc", 15s);
+  if (grpc_port == 0) throw InputError("ruffini-aggregator did not start: " + aggregator.stderr_text());
+  const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
+  Observer observer(address);
+  log("aggregator on " + address + "; starting ruffini-controller (joint states at " + rate + " Hz)");
+  Child controller({exe("ruffini-controller"), "--aggregator", address, "--rate-hz", rate},
+                   (run / "controller").string());
+  log("starting ruffini-sim (" + o.scenario_path + ", " + rate + " Hz)");
+  Child sim({exe("ruffini-sim"), "--scene", o.scene_path, "--scenario", o.scenario_path, "--rate-hz", rate,
+             "--command-port", "0", "--stream-port", "0", "--ports-file", (run / "sim" / "ports").string()},
+            (run / "sim").string());
+  const std::int64_t t0 = service::UnixNowNs();  // the scenario's time 0 (the sim's start), within milliseconds
+  const int stream_port = sim.WaitPort((run / "sim" / "ports").string(), "stream", 15s);
+  if (stream_port == 0) throw InputError("ruffini-sim did not start: " + sim.stderr_text());
+  std::map<std::string, std::unique_ptr<Child>> decoders;
+  auto start_decoder = [&](const std::string& patch) {
+    decoders[patch] = std::make_unique<Child>(
+        std::vector<std::string>{exe("ruffini-decoder"), "--scene", o.scene_path, "--patch", patch, "--interrogator",
+                                 "127.0.0.1:" + std::to_string(stream_port), "--aggregator", address, "--metrics",
+                                 "127.0.0.1:0", "--rate-hz", rate},
+        (run / ("decoder-" + patch)).string());
+  };
+  for (const auto& p : patches) start_decoder(p);
+  log("one ruffini-decoder per patch: " + std::to_string(patches.size()) + " started");
+
+  auto t_s = [&] { return static_cast<double>(service::UnixNowNs() - t0) / 1e9; };
+  auto sleep_until = [&](double t) {
+    while (t_s() < t) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  };
+  auto all_healthy = [&] {
+    const auto st = observer.Status();
+    if (st.patches_size() == 0) return false;
+    for (const auto& p : st.patches()) {
+      if (p.link_state() != v1::LINK_STATE_HEALTHY) return false;
+    }
+    return true;
+  };
+  // Operator resets: the current epoch, retried every 100 ms until accepted (or the timeout).
+  auto reset_until_clear = [&](std::chrono::milliseconds timeout, std::string& observed) {
+    std::string last;
+    const bool ok = WaitUntil([&] {
+      const auto latest = observer.Latest();
+      if (!latest) return false;
+      if (latest->state.state() == v1::SafetyState::STATE_CLEAR) return true;
+      const auto r = observer.Reset(latest->state.stop_epoch());
+      last = r.message();
+      return false;
+    }, timeout, 100ms);
+    observed = ok ? "CLEAR at " + Fmt("%.2f", t_s()) + " s" : "still latched: " + last;
+    return ok;
+  };
+  std::vector<Event> events;
+  auto record = [&](Event e) {
+    log(std::string(e.pass ? "  PASS  " : "  FAIL  ") + Fmt("%6.2f s  ", e.t_s) + e.name + ": " + e.observed);
+    events.push_back(std::move(e));
+  };
+  auto first_after = [&](std::int64_t since_ns, const std::function<bool(const v1::SafetyState&)>& pred)
+      -> std::optional<SafetyRecord> {
+    for (const auto& r : observer.Safety()) {
+      if (r.arrival_ns >= since_ns && pred(r.state)) return r;
+    }
+    return std::nullopt;
+  };
+
+  // 1. Start-up: FAULT until every patch is healthy, then an operator reset.
+  {
+    Event e{"start-up", "FAULT (start-up) until every decoder is healthy; CLEAR after an authorized reset", 0, false, ""};
+    const auto first = observer.Latest();
+    const bool healthy = WaitUntil(all_healthy, 10s, 50ms);
+    std::string observed;
+    const bool clear = healthy && reset_until_clear(4s, observed);
+    e.t_s = t_s();
+    e.pass = first && first->state.state() == v1::SafetyState::STATE_FAULT && clear;
+    e.observed = std::string("first state ") + (first ? StateName(first->state.state()) : "none") +
+                 (healthy ? "; every patch healthy; " + observed : "; not every patch became healthy");
+    record(e);
+  }
+  // 2. A light touch below the threshold (scenario 4.0 to 6.1 s): no stop.
+  {
+    const std::int64_t from = service::UnixNowNs();
+    sleep_until(6.5);
+    Event e{"light touch on forearm_a (0.7 N, threshold 1.5 N)", "no STOP, no FAULT", t_s(), false, ""};
+    const auto bad = first_after(from, [](const v1::SafetyState& s) { return s.state() != v1::SafetyState::STATE_CLEAR; });
+    double peak = 0;
+    for (const auto& c : observer.Contacts()) {
+      if (c.arrival_ns >= from && c.patch == patches[0]) peak = std::max(peak, c.force_n);
+    }
+    e.pass = !bad && peak > 0.2;
+    e.observed = bad ? std::string(StateName(bad->state.state())) + ": " + bad->state.cause().message()
+                     : "stayed CLEAR; the touch was felt (peak " + Fmt("%.2f", peak) + " N on " + patches[0] + ")";
+    record(e);
+  }
+  // 3. A hard touch on the forearm seam (scenario 7.0 to 8.6 s): STOP.
+  std::vector<double> stop_latency_ms;
+  {
+    const std::int64_t from = service::UnixNowNs();
+    Event e{"hard touch on the forearm seam (2.5 N each side)", "STOP (contact above 1.5 N)", 0, false, ""};
+    std::optional<SafetyRecord> stop;
+    WaitUntil([&] {
+      stop = first_after(from, [](const v1::SafetyState& s) { return s.state() != v1::SafetyState::STATE_CLEAR; });
+      return stop.has_value() || t_s() > 9.0;
+    }, 10s, 2ms);
+    e.t_s = t_s();
+    if (stop) {
+      const auto& c = stop->state.cause();
+      const double ms = static_cast<double>(stop->arrival_ns - c.t_ns()) / 1e6;
+      e.pass = stop->state.state() == v1::SafetyState::STATE_STOP && c.kind() == v1::SafetyCause::KIND_CONTACT &&
+               c.link() == "forearm_link";
+      e.observed = std::string(StateName(stop->state.state())) + " epoch " + std::to_string(stop->state.stop_epoch()) +
+                   ": " + c.message() + "; frame-to-stop at this subscriber " + Fmt("%.3f", ms) + " ms";
+      if (e.pass) stop_latency_ms.push_back(ms);
+    } else {
+      e.observed = "no STOP";
+    }
+    record(e);
+  }
+  // 4. Released: an authorized reset clears it.
+  {
+    sleep_until(9.2);
+    Event e{"authorized reset after the release", "CLEAR", 0, false, ""};
+    std::string observed;
+    e.pass = reset_until_clear(4s, observed);
+    e.t_s = t_s();
+    e.observed = observed;
+    record(e);
+  }
+  // 5. A decoder killed: FAULT within 50 ms.
+  {
+    sleep_until(std::max(t_s(), 10.5));
+    Event e{"decoder " + killed_patch + " killed (SIGKILL)", "FAULT within 50 ms", 0, false, ""};
+    const std::int64_t killed_at = service::UnixNowNs();
+    decoders[killed_patch]->Signal(SIGKILL);
+    std::optional<SafetyRecord> fault;
+    WaitUntil([&] {
+      fault = first_after(killed_at, [](const v1::SafetyState& s) { return s.state() == v1::SafetyState::STATE_FAULT; });
+      return fault.has_value();
+    }, 2s);
+    e.t_s = t_s();
+    if (fault) {
+      const double ms = static_cast<double>(fault->arrival_ns - killed_at) / 1e6;
+      e.pass = ms <= 50.0 && fault->state.cause().patch_id() == killed_patch;
+      e.observed = "FAULT after " + Fmt("%.2f", ms) + " ms: " + fault->state.cause().message();
+    } else {
+      e.observed = "no FAULT within 2 s";
+    }
+    record(e);
+  }
+  // 6. It restarts: healthy again, then a reset clears.
+  {
+    start_decoder(killed_patch);
+    Event e{"decoder " + killed_patch + " restarted", "healthy again; CLEAR after a reset", 0, false, ""};
+    const bool healthy = WaitUntil(all_healthy, 10s, 50ms);
+    std::string observed;
+    e.pass = healthy && reset_until_clear(4s, observed);
+    e.t_s = t_s();
+    e.observed = healthy ? observed : "not healthy within 10 s";
+    record(e);
+  }
+  // 7. Joint states stop (the controller frozen): FAULT.
+  {
+    Event e{"joint states stop (controller frozen)", "FAULT (joint states stale) within 100 ms", 0, false, ""};
+    const std::int64_t frozen_at = service::UnixNowNs();
+    controller.Signal(SIGSTOP);
+    std::optional<SafetyRecord> fault;
+    WaitUntil([&] {
+      fault = first_after(frozen_at, [](const v1::SafetyState& s) { return s.state() == v1::SafetyState::STATE_FAULT; });
+      return fault.has_value();
+    }, 2s);
+    e.t_s = t_s();
+    if (fault) {
+      const double ms = static_cast<double>(fault->arrival_ns - frozen_at) / 1e6;
+      e.pass = ms <= 100.0 && fault->state.cause().kind() == v1::SafetyCause::KIND_JOINT_STATES_STALE;
+      e.observed = "FAULT after " + Fmt("%.2f", ms) + " ms: " + fault->state.cause().message();
+    } else {
+      e.observed = "no FAULT within 2 s";
+    }
+    std::this_thread::sleep_for(300ms);  // the controller stays frozen a moment, as a real stall would
+    controller.Signal(SIGCONT);
+    record(e);
+  }
+  // 8. Joint states back: a reset clears.
+  {
+    Event e{"joint states back", "CLEAR after a reset", 0, false, ""};
+    std::string observed;
+    e.pass = reset_until_clear(4s, observed);
+    e.t_s = t_s();
+    e.observed = observed;
+    record(e);
+  }
+
+  // --- Shut down: everything by pid; the aggregator last (its subscribers get FAULT, then the stream ends).
+  log("stopping: controller, decoders, sim, aggregator");
+  const int controller_exit = controller.Stop();
+  for (auto& [name, d] : decoders) d->Stop();
+  sim.Stop();
+  aggregator.Stop(3000ms);
+  WaitUntil([&] { return observer.safety_ended(); }, 3s, 10ms);
+  {
+    Event e{"aggregator shut down", "FAULT (shutting down), then the stream ends", t_s(), false, ""};
+    const auto last = observer.Latest();
+    e.pass = observer.safety_ended() && last && last->state.state() == v1::SafetyState::STATE_FAULT &&
+             last->state.cause().kind() == v1::SafetyCause::KIND_SHUTTING_DOWN;
+    e.observed = last ? std::string(StateName(last->state.state())) + " (" + last->state.cause().message() +
+                            (observer.safety_ended() ? "), stream ended" : "), stream still open")
+                      : "nothing";
+    record(e);
+  }
+  observer.Stop();
+
+  // --- Report ------------------------------------------------------------------------------------------
+  const auto safety = observer.Safety();
+  const auto contacts = observer.Contacts();
+  auto rel = [&](std::int64_t ns) { return static_cast<double>(ns - t0) / 1e9; };
+  {
+    plot::Figure f("Force per patch (WatchContacts)", "time since the sim started (s)", "force (N)", 760, 380);
+    for (const auto& p : patches) {
+      plot::Series s;
+      s.label = p;
+      s.style = plot::Series::Style::kPoints;
+      for (const auto& c : contacts) {
+        if (c.patch != p) continue;
+        s.x.push_back(rel(c.t_ns));
+        s.y.push_back(c.force_n);
+      }
+      if (!s.x.empty()) f.Add(s);
+    }
+    f.AddHLine(1.5, "stop threshold 1.5 N");
+    f.Save((out / "forces.svg").string());
+  }
+  {
+    plot::Figure f("Safety state at the demo's subscriber", "time since the sim started (s)",
+                   "0 CLEAR, 1 STOP, 2 FAULT", 760, 300);
+    plot::Series s;
+    s.label = "state";
+    double prev = -1;
+    for (const auto& r : safety) {
+      const double v = r.state.state() == v1::SafetyState::STATE_CLEAR ? 0 : r.state.state() == v1::SafetyState::STATE_STOP ? 1 : 2;
+      if (prev >= 0 && v != prev) {
+        s.x.push_back(rel(r.arrival_ns));
+        s.y.push_back(prev);
+      }
+      s.x.push_back(rel(r.arrival_ns));
+      s.y.push_back(v);
+      prev = v;
+    }
+    f.Add(s);
+    f.SetYRange(-0.2, 2.2);
+    for (const auto& e : events) f.AddVLine(e.t_s, e.pass ? "" : "FAIL");
+    f.Save((out / "safety.svg").string());
+  }
+  {
+    // Contact positions in the base frame (side view x-z), the arm drawn at its zero pose for orientation.
+    plot::Figure f("Contact positions on the robot (base frame, side view)", "x (m)", "z (m)", 520, 620);
+    const auto robot = robot::LoadRobotScene(scene);
+    robot::Data fk;
+    std::vector<double> q(robot.model.num_dof(), 0.0);
+    if (robot::ForwardKinematics(robot.model, q, fk) == robot::FkStatus::kOk) {
+      plot::Series arm;
+      arm.label = "arm (zero pose)";
+      arm.colour = "#888888";
+      arm.style = plot::Series::Style::kLinePoints;
+      for (std::size_t k = 0; k < robot.model.num_links(); ++k) {
+        arm.x.push_back(fk.X_BL[k].translation().x());
+        arm.y.push_back(fk.X_BL[k].translation().z());
+      }
+      f.Add(arm);
+    }
+    for (const auto& p : patches) {
+      plot::Series s;
+      s.label = p;
+      s.style = plot::Series::Style::kPoints;
+      for (const auto& c : contacts) {
+        if (c.patch == p && c.located && c.force_n > 0.3) {
+          s.x.push_back(c.x);
+          s.y.push_back(c.z);
+        }
+      }
+      if (!s.x.empty()) f.Add(s);
+    }
+    f.Save((out / "positions.svg").string());
+  }
+  std::vector<double> age_ms;
+  for (const auto& c : contacts) age_ms.push_back(static_cast<double>(c.arrival_ns - c.t_ns) / 1e6);
+  std::sort(age_ms.begin(), age_ms.end());
+  auto q = [&](double p) { return age_ms.empty() ? NAN : age_ms[static_cast<std::size_t>(p * static_cast<double>(age_ms.size() - 1))]; };
+  {
+    plot::Figure f("Frame to body contact at the subscriber", "latency (ms)", "contact frames", 640, 360);
+    plot::Series s;
+    s.label = "frames per 0.1 ms bin";
+    s.style = plot::Series::Style::kLine;
+    const double hi = age_ms.empty() ? 1.0 : std::min(q(0.999) * 1.2, 20.0);
+    const int bins = 60;
+    std::vector<double> counts(bins, 0);
+    for (double a : age_ms) {
+      const int b = std::clamp(static_cast<int>(a / hi * bins), 0, bins - 1);
+      counts[static_cast<std::size_t>(b)] += 1;
+    }
+    for (int b = 0; b < bins; ++b) {
+      s.x.push_back((b + 0.5) * hi / bins);
+      s.y.push_back(counts[static_cast<std::size_t>(b)]);
+    }
+    f.Add(s);
+    f.Save((out / "latency.svg").string());
+  }
+  int passed = 0;
+  for (const auto& e : events) passed += e.pass;
+  std::ostringstream md;
+  md << "# `ruffini demo`\n\n"
+     << "Written by `ruffini demo` (" << o.scene_path << ", " << o.scenario_path << ", " << rate << " Hz): "
+     << "ruffini-sim, one ruffini-decoder per patch, ruffini-aggregator and ruffini-controller as separate processes "
+        "on 127.0.0.1. Logs of every process are in `logs/`. The timeline is in docs/demo.md.\n\n"
+     << "**" << passed << " of " << events.size() << " scripted events got their expected safety response.**\n\n"
+     << "| t (s) | event | expected | observed | |\n| --- | --- | --- | --- | --- |\n";
+  for (const auto& e : events) {
+    md << "| " << Fmt("%.2f", e.t_s) << " | " << e.name << " | " << e.expected << " | " << e.observed << " | "
+       << (e.pass ? "pass" : "**FAIL**") << " |\n";
+  }
+  md << "\n## Numbers\n\n"
+     << "- Safety states received: " << safety.size() << " (a heartbeat every 10 ms).\n"
+     << "- Contact frames received (WatchContacts): " << contacts.size() << "; frame (the interrogator's "
+     << "timestamp) to body contact at this subscriber: p50 " << Fmt("%.3f", q(0.5)) << " ms, p99 "
+     << Fmt("%.3f", q(0.99)) << " ms.\n"
+     << "- Frame-to-stop at this subscriber: ";
+  for (double v : stop_latency_ms) md << Fmt("%.3f", v) << " ms ";
+  md << "(the first above-threshold frame's timestamp to the STOP's arrival).\n"
+     << "- ruffini-controller exit status: " << controller_exit << ".\n\n"
+     << "## Figures\n\n"
+     << "![forces](forces.svg)\n\n![safety](safety.svg)\n\n![positions](positions.svg)\n\n![latency](latency.svg)\n";
+  const std::string report = (out / "report.md").string();
+  std::ofstream(report) << md.str();
+  DemoResult result;
+  result.events = static_cast<int>(events.size());
+  result.passed = passed;
+  result.report_path = report;
+  return result;
+}
+
+}  // namespace ruffini::cli
