@@ -252,12 +252,42 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
     }
   }
 
-  // A decoder dies: FAULT.
+  // A decoder dies (kill -9): every WatchSafety subscriber sees FAULT within 50 ms. A second subscriber joins
+  // first.
+  Controller second(address);
+  ASSERT_TRUE(rt::WaitFor([&] { return second.Snapshot().size() >= 3; }, 5s));
+  const std::int64_t killed_at = UnixNs();
   decoders[3].Signal(SIGKILL);
+  for (Controller* c : {&controller, &second}) {
+    std::int64_t arrival = 0;
+    ASSERT_TRUE(rt::WaitFor([&] {
+      for (const auto& s : c->Snapshot()) {
+        if (s.arrival_ns >= killed_at && s.state.state() == v1::SafetyState::STATE_FAULT &&
+            s.state.cause().patch_id() == "upper_arm_b") {
+          arrival = s.arrival_ns;
+          return true;
+        }
+      }
+      return false;
+    }, 5s));
+    const double ms = static_cast<double>(arrival - killed_at) / 1e6;
+    std::printf("[ metric ] kill -9 of a decoder -> FAULT at a subscriber: %.2f ms\n", ms);
+    EXPECT_LT(ms, 50.0);
+  }
+  // Joint states stop: a new cause (joint states stale) on top of the latched FAULT, epoch + 1.
+  const std::uint64_t epoch = Last(controller.Snapshot())->state.stop_epoch();
+  const std::int64_t joints_stopped = UnixNs();
+  controller.StopJoints();
   EXPECT_TRUE(rt::WaitFor([&] {
     const auto l = Last(controller.Snapshot());
-    return l && l->state.state() == v1::SafetyState::STATE_FAULT;
-  }, 5s));
+    return l && l->state.cause().kind() == v1::SafetyCause::KIND_JOINT_STATES_STALE && l->state.stop_epoch() > epoch;
+  }, 3s));
+  std::printf("[ metric ] joint states stopped -> FAULT (stale, limit 200 ms here): %.1f ms\n",
+              static_cast<double>(UnixNs() - joints_stopped) / 1e6);
+  // A reset now is refused (the causes persist) and changes nothing.
+  const auto refused_now = controller.Reset(Last(controller.Snapshot())->state.stop_epoch());
+  EXPECT_FALSE(refused_now.accepted());
+  EXPECT_EQ(refused_now.state().state(), v1::SafetyState::STATE_FAULT);
 
   // The aggregator shuts down: FAULT (shutting down), the stream ends, exit 0.
   EXPECT_EQ(agg.Stop(), 0);
@@ -266,7 +296,6 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   const auto last = controller.Snapshot().back();
   EXPECT_EQ(last.state.state(), v1::SafetyState::STATE_FAULT);
   EXPECT_EQ(last.state.cause().kind(), v1::SafetyCause::KIND_SHUTTING_DOWN);
-  controller.StopJoints();
 }
 
 TEST(AggregatorProcess, ASceneWithoutSafetyIsAClearError) {
