@@ -1,6 +1,5 @@
 // ruffini-aggregator: one per robot (server.h). Exit codes: 0 ok (stopped by SIGINT or SIGTERM), 1 bad input
 // (the message names what is wrong), 2 usage. stdout carries one line, the ports ("ports: grpc P metrics P").
-#include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
@@ -31,12 +30,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1.0, 10000.0));
   CLI11_PARSE(app, argc, argv);
 
-  sigset_t stop_signals;
-  sigemptyset(&stop_signals);
-  sigaddset(&stop_signals, SIGINT);
-  sigaddset(&stop_signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
-  signal(SIGPIPE, SIG_IGN);
+  ruffini::service::BlockStopSignals();
   try {
     ruffini::aggregator::ServerConfig config;
     config.listen = ruffini::service::ParseHostPort(listen, "--listen", /*allow_zero=*/true);
@@ -53,16 +47,9 @@ int main(int argc, char** argv) {
     spdlog::info("{}", ruffini::aggregator::Describe(setup));
     spdlog::warn("plaintext gRPC (no TLS yet): every ResetStop caller is treated as an operator");
     ruffini::aggregator::AggregatorServer server(config, std::move(setup));
-    std::printf("ports: grpc %u metrics %u\n", static_cast<unsigned>(server.port()),
-                static_cast<unsigned>(server.metrics_port()));
-    std::fflush(stdout);
-    if (!ports_file.empty()) {
-      ruffini::service::WriteFileAtomically(ports_file, "grpc " + std::to_string(server.port()) + "\nmetrics " +
-                                                            std::to_string(server.metrics_port()) + "\n");
-    }
+    ruffini::service::AnnouncePorts(ports_file, {{"grpc", server.port()}, {"metrics", server.metrics_port()}});
     server.Start();
-    int sig = 0;
-    sigwait(&stop_signals, &sig);
+    const int sig = ruffini::service::WaitForStopSignal();
     spdlog::info("signal {}: sending FAULT to every subscriber and stopping", sig);
     server.Stop();
     spdlog::info("stopped");

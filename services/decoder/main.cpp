@@ -1,7 +1,6 @@
 // ruffini-decoder: one fibre, one service (service.h). Exit codes as the other tools: 0 ok (stopped by SIGINT
 // or SIGTERM), 1 bad input (the message names what is wrong), 2 usage. stdout carries one line, the metrics
 // port ("ports: metrics P"); logs go to stderr.
-#include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
@@ -41,13 +40,7 @@ int main(int argc, char** argv) {
   app.add_option("--ports-file", ports_file, "Write the chosen metrics port here ('metrics P')");
   CLI11_PARSE(app, argc, argv);
 
-  // Block the stop signals in every thread; main waits for them with sigwait.
-  sigset_t stop_signals;
-  sigemptyset(&stop_signals);
-  sigaddset(&stop_signals, SIGINT);
-  sigaddset(&stop_signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
-  signal(SIGPIPE, SIG_IGN);
+  ruffini::service::BlockStopSignals();  // in every thread; main waits for them
 
   try {
     config.interrogator = ruffini::service::ParseHostPort(interrogator, "--interrogator");
@@ -56,14 +49,9 @@ int main(int argc, char** argv) {
     ruffini::decoder::DecoderService service(config);
     spdlog::info("{}", service.Describe());
     spdlog::warn("the aggregator link is plaintext (no TLS yet)");
-    std::printf("ports: metrics %u\n", static_cast<unsigned>(service.metrics_port()));
-    std::fflush(stdout);
-    if (!ports_file.empty()) {
-      ruffini::service::WriteFileAtomically(ports_file, "metrics " + std::to_string(service.metrics_port()) + "\n");
-    }
+    ruffini::service::AnnouncePorts(ports_file, {{"metrics", service.metrics_port()}});
     service.Start();
-    int sig = 0;
-    sigwait(&stop_signals, &sig);
+    const int sig = ruffini::service::WaitForStopSignal();
     spdlog::info("signal {}: stopping", sig);
     service.Stop();
     spdlog::info("stopped");

@@ -30,14 +30,7 @@ const std::string kScene = kSrc + "/config/scenes/cobot.yaml";
 const std::string kScenario = kSrc + "/config/scenarios/cobot-demo.yaml";
 const std::vector<std::string> kPatches = {"forearm_a", "forearm_b", "upper_arm_a", "upper_arm_b"};
 
-std::map<std::string, int> ReadPorts(const std::string& path) {
-  std::map<std::string, int> ports;
-  std::ifstream in(path);
-  std::string key;
-  int port = 0;
-  while (in >> key >> port) ports[key] = port;
-  return ports;
-}
+using rt::ReadPorts;
 
 // Starts an executable that writes a ports file; waits for `key` in it.
 rt::Process StartWithPorts(std::vector<std::string> args, const std::string& dir, const std::string& key, int& port) {

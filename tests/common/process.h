@@ -12,6 +12,7 @@
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <map>
 #include <string>
 #include <thread>
 #include <vector>
@@ -21,6 +22,16 @@ namespace ruffini::testing {
 inline std::string Slurp(const std::string& path) {
   std::ifstream in(path);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// "key P" lines of a ports file (the services write it atomically).
+inline std::map<std::string, int> ReadPorts(const std::string& path) {
+  std::map<std::string, int> ports;
+  std::ifstream in(path);
+  std::string key;
+  int port = 0;
+  while (in >> key >> port) ports[key] = port;
+  return ports;
 }
 
 // Polls cond every `poll` until it holds (true) or the timeout passes (false).

@@ -39,15 +39,7 @@ std::int64_t UnixNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
-// Reads "key P" lines of a ports file once it is complete.
-std::map<std::string, int> ReadPorts(const std::string& path) {
-  std::map<std::string, int> ports;
-  std::ifstream in(path);
-  std::string key;
-  int port = 0;
-  while (in >> key >> port) ports[key] = port;
-  return ports;
-}
+using rt::ReadPorts;
 
 struct Sim {
   Process process;

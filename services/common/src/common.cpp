@@ -1,6 +1,8 @@
 #include "ruffini/service/common.h"
 
 #include <openssl/evp.h>
+#include <pthread.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <array>
@@ -96,6 +98,40 @@ std::string InstanceName() {
   std::array<char, 256> host{};
   if (gethostname(host.data(), host.size() - 1) != 0) std::snprintf(host.data(), host.size(), "unknown");
   return std::string(host.data()) + ":" + std::to_string(getpid());
+}
+
+namespace {
+sigset_t StopSet() {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  return set;
+}
+}  // namespace
+
+void BlockStopSignals() {
+  const sigset_t set = StopSet();
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+}
+
+int WaitForStopSignal() {
+  const sigset_t set = StopSet();
+  int sig = 0;
+  sigwait(&set, &sig);
+  return sig;
+}
+
+void AnnouncePorts(const std::string& path, const std::vector<std::pair<std::string, int>>& ports) {
+  std::string line = "ports:", file;
+  for (const auto& [key, port] : ports) {
+    line += " " + key + " " + std::to_string(port);
+    file += key + " " + std::to_string(port) + "\n";
+  }
+  std::printf("%s\n", line.c_str());
+  std::fflush(stdout);
+  if (!path.empty()) WriteFileAtomically(path, file);
 }
 
 std::int64_t UnixNowNs() noexcept {

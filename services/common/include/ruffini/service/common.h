@@ -3,6 +3,8 @@
 // writes when it was asked for port 0, the process instance name.
 #include <cstdint>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace ruffini::service {
 
@@ -26,6 +28,15 @@ void WriteFileAtomically(const std::string& path, const std::string& text);
 
 // "host:pid", to tell two processes apart in logs and hellos.
 std::string InstanceName();
+
+// Blocks SIGINT and SIGTERM in the calling thread and every thread it starts later (call it first in main),
+// and ignores SIGPIPE (a peer closing a socket is an error code, not a death).
+void BlockStopSignals();
+// Waits for SIGINT or SIGTERM (blocked by BlockStopSignals); returns the signal.
+int WaitForStopSignal();
+
+// Writes a ports file ("key P" lines) when path is not empty, and prints "ports: key P key P" on stdout.
+void AnnouncePorts(const std::string& path, const std::vector<std::pair<std::string, int>>& ports);
 
 // Unix time now, ns.
 std::int64_t UnixNowNs() noexcept;
