@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "process.h"
+#include "scrape.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 
 namespace {
@@ -289,6 +290,22 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   const auto last = controller.Snapshot().back();
   EXPECT_EQ(last.state.state(), v1::SafetyState::STATE_FAULT);
   EXPECT_EQ(last.state.cause().kind(), v1::SafetyCause::KIND_SHUTTING_DOWN);
+}
+
+TEST(AggregatorProcess, MetricsPassPromtool) {
+  if (std::system("command -v promtool >/dev/null 2>&1") != 0) GTEST_SKIP() << "promtool not installed";
+  const std::string dir = (fs::current_path() / "aggregator_metrics").string();
+  int grpc_port = 0;
+  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+                                    "127.0.0.1:0"},
+                                   dir, "grpc", grpc_port);
+  Controller watcher("127.0.0.1:" + std::to_string(grpc_port));
+  ASSERT_TRUE(rt::WaitFor([&] { return watcher.Snapshot().size() >= 3; }, 5s));
+  const std::string text = rt::Scrape(rt::ReadPorts(dir + "/ports")["metrics"]);
+  ASSERT_NE(text.find("ruffini_aggregator_safety_state{state=\"fault\"} 1"), std::string::npos) << text;
+  EXPECT_NE(text.find("ruffini_aggregator_safety_subscribers 1"), std::string::npos) << text;
+  std::ofstream(dir + "/scrape.txt") << text;
+  EXPECT_EQ(std::system(("promtool check metrics < " + dir + "/scrape.txt").c_str()), 0) << text;
 }
 
 TEST(AggregatorProcess, ASceneWithoutSafetyIsAClearError) {
