@@ -41,11 +41,19 @@ struct SafetyRecord {
   std::int64_t arrival_ns = 0;
 };
 struct ContactRecord {
-  std::string patch;
+  std::string patch;       // the first contributing patch
+  int patches = 0;         // how many patches contributed (2 for a fused seam touch)
+  std::string link;
   double force_n = 0;
   std::int64_t t_ns = 0, arrival_ns = 0;
   bool located = false;
-  double x = 0, y = 0, z = 0;
+  double x = 0, y = 0, z = 0;     // base frame, m
+  double lx = 0, ly = 0, lz = 0;  // link frame, m
+};
+// How many contacts one ContactSet had on each link.
+struct SetRecord {
+  std::int64_t arrival_ns = 0;
+  std::map<std::string, int> per_link;
 };
 
 // The demo's own subscriber: WatchSafety and WatchContacts, recorded with arrival times.
@@ -78,12 +86,17 @@ class Observer {
       while (r->Read(&set)) {
         const std::int64_t now = service::UnixNowNs();
         std::lock_guard lock(mu_);
+        SetRecord sr;
+        sr.arrival_ns = now;
+        for (const auto& c : set.contacts()) ++sr.per_link[c.link()];
+        sets_.push_back(std::move(sr));
         for (const auto& c : set.contacts()) {
           const std::string patch = c.patch_ids_size() > 0 ? c.patch_ids(0) : "";
           const auto key = std::make_pair(patch, c.t_ns());
           if (!seen_.insert(key).second) continue;
-          contact_log_.push_back({patch, c.force_n(), c.t_ns(), now, c.located(), c.p_bc_m().x(), c.p_bc_m().y(),
-                                  c.p_bc_m().z()});
+          contact_log_.push_back({patch, c.patch_ids_size(), c.link(), c.force_n(), c.t_ns(), now, c.located(),
+                                  c.p_bc_m().x(), c.p_bc_m().y(), c.p_bc_m().z(), c.p_lc_m().x(), c.p_lc_m().y(),
+                                  c.p_lc_m().z()});
         }
       }
       r->Finish();
@@ -103,6 +116,10 @@ class Observer {
   std::vector<ContactRecord> Contacts() {
     std::lock_guard lock(mu_);
     return contact_log_;
+  }
+  std::vector<SetRecord> Sets() {
+    std::lock_guard lock(mu_);
+    return sets_;
   }
   std::optional<SafetyRecord> Latest() {
     std::lock_guard lock(mu_);
@@ -137,6 +154,7 @@ class Observer {
   std::mutex mu_;
   std::vector<SafetyRecord> safety_log_;
   std::vector<ContactRecord> contact_log_;
+  std::vector<SetRecord> sets_;
   std::set<std::pair<std::string, std::int64_t>> seen_;
   std::atomic<bool> safety_ended_{false};
 };
@@ -506,6 +524,59 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     f.Add(s);
     f.Save((out / "latency.svg").string());
   }
+  // Position error on the forearm, in forearm_link's frame (independent of the arm's pose): the light interior
+  // touch (forearm_a, Y 60 mm, R 60 deg) and the seam touch (symmetric about forearm_a's R = 145 deg edge at
+  // Y 75 mm), over the located frames of each hold (cobot-demo.yaml's times).
+  std::string seam_section;
+  {
+    const auto robot = robot::LoadRobotScene(scene);
+    const auto* a = robot.FindPatch(patches[0]);
+    if (a != nullptr && a->mount.link == "forearm_link") {
+      auto truth = [&](double y, double r) { return robot::PatchToLink(a->mount, {y, r}).p_LS_m; };
+      auto errors = [&](double from_s, double to_s, const Eigen::Vector3d& want, int& fused, int& n) {
+        std::vector<double> e;
+        fused = n = 0;
+        for (const auto& c : contacts) {
+          const double t = rel(c.t_ns);
+          if (t < from_s || t > to_s || c.link != "forearm_link" || !c.located) continue;
+          e.push_back(1000.0 * (Eigen::Vector3d(c.lx, c.ly, c.lz) - want).norm());
+          ++n;
+          fused += c.patches >= 2;
+        }
+        std::sort(e.begin(), e.end());
+        return e;
+      };
+      int fused_i = 0, n_i = 0, fused_s = 0, n_s = 0;
+      const auto interior = errors(4.3, 5.8, truth(60, 60), fused_i, n_i);
+      const auto seam = errors(7.3, 8.3, truth(75, 145), fused_s, n_s);
+      int sets_seam = 0, sets_one = 0;
+      for (const auto& sr : observer.Sets()) {
+        const double t = rel(sr.arrival_ns);
+        if (t < 7.3 || t > 8.3) continue;
+        const auto it = sr.per_link.find("forearm_link");
+        if (it == sr.per_link.end()) continue;
+        ++sets_seam;
+        sets_one += it->second == 1;
+      }
+      auto med = [](const std::vector<double>& v) { return v.empty() ? NAN : v[v.size() / 2]; };
+      auto p90 = [](const std::vector<double>& v) { return v.empty() ? NAN : v[static_cast<std::size_t>(0.9 * static_cast<double>(v.size() - 1))]; };
+      std::ostringstream m;
+      m << "\n## The seam (`" << o.scenario_path << "` only)\n\n"
+        << "Position error in `forearm_link`'s frame of the body contacts the aggregator streamed (fused across "
+           "patches), over the located frames of each hold:\n\n"
+        << "| touch | truth | frames | from two patches | error median / p90 (mm) |\n| --- | --- | --- | --- | --- |\n"
+        << "| light, interior (" << patches[0] << " Y 60 mm, R 60 deg) | that point | " << n_i << " | " << fused_i
+        << " | " << Fmt("%.1f", med(interior)) << " / " << Fmt("%.1f", p90(interior)) << " |\n"
+        << "| hard, on the seam (2.5 N at R 135 deg of one patch and R 10 deg of the other) | the seam at Y 75 mm | "
+        << n_s << " | " << fused_s << " | " << Fmt("%.1f", med(seam)) << " / " << Fmt("%.1f", p90(seam)) << " |\n\n"
+        << "During the seam hold, " << sets_one << " of " << sets_seam
+        << " contact sets with a forearm contact had exactly one (the two patches' contacts fused into one).\n";
+      seam_section = m.str();
+      log("seam: " + std::to_string(n_s) + " frames, median error " + Fmt("%.1f", med(seam)) + " mm (" +
+          std::to_string(fused_s) + " from two patches); interior touch median error " + Fmt("%.1f", med(interior)) +
+          " mm");
+    }
+  }
   int passed = 0;
   for (const auto& e : events) passed += e.pass;
   std::ostringstream md;
@@ -527,7 +598,8 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
      << "- Frame-to-stop at this subscriber: ";
   for (double v : stop_latency_ms) md << Fmt("%.3f", v) << " ms ";
   md << "(the first above-threshold frame's timestamp to the STOP's arrival).\n"
-     << "- ruffini-controller exit status: " << controller_exit << ".\n\n"
+     << "- ruffini-controller exit status: " << controller_exit << ".\n"
+     << seam_section << "\n"
      << "## Figures\n\n"
      << "![forces](forces.svg)\n\n![safety](safety.svg)\n\n![positions](positions.svg)\n\n![latency](latency.svg)\n";
   const std::string report = (out / "report.md").string();

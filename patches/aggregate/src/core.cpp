@@ -311,6 +311,9 @@ bool Core::PlaceContact(int patch, std::int64_t t_ns, const v1::PatchContact& c,
   sp.y_mm = located ? c.y_mm() : 75.0;
   sp.r_deg = located ? c.r_deg() : 72.5;
   const robot::SurfaceInLink s = robot::PatchToLink(*want.mount, sp);
+  out.mutable_p_lc_m()->set_x(s.p_LS_m.x());
+  out.mutable_p_lc_m()->set_y(s.p_LS_m.y());
+  out.mutable_p_lc_m()->set_z(s.p_LS_m.z());
   const Eigen::Isometry3d& X_BL = fk_.X_BL[*link];
   const Eigen::Vector3d p = X_BL * s.p_LS_m;
   const Eigen::Vector3d n = X_BL.linear() * s.n_L;
@@ -421,6 +424,10 @@ v1::ContactSet Core::Contacts(std::int64_t now_ns) {
   for (const fusion::BodyContact& f : fusion_data_->contacts()) {
     v1::BodyContact* b = set.add_contacts();
     b->set_link(setup_.robot->link(f.link).name);
+    const Eigen::Vector3d p_L = fk_latest_.X_BL[f.link].inverse() * f.p_BC_m;
+    b->mutable_p_lc_m()->set_x(p_L.x());
+    b->mutable_p_lc_m()->set_y(p_L.y());
+    b->mutable_p_lc_m()->set_z(p_L.z());
     b->mutable_p_bc_m()->set_x(f.p_BC_m.x());
     b->mutable_p_bc_m()->set_y(f.p_BC_m.y());
     b->mutable_p_bc_m()->set_z(f.p_BC_m.z());
