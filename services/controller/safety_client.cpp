@@ -297,14 +297,23 @@ void SafetyClient::ReadLoop() {
       std::lock_guard lock(ctx_mu_);
       ctx_ = nullptr;
     }
+    if (stopping_) break;  // our own cancel: not a decision to report
     {
       std::lock_guard lock(mu_);
       Apply(monitor_.OnStreamEnded(StatusText(status), SteadyClock::now()));
     }
-    if (stopping_) break;
     pause = any ? config_.reconnect_initial : std::min(pause * 2, config_.reconnect_max);
-    std::unique_lock lock(ctx_mu_);
-    stop_cv_.wait_for(lock, pause, [this] { return stopping_.load(); });
+    // At least reconnect_initial; after that, go as soon as the channel is connected again (the channel
+    // retries on its own backoff), or when the pause is over.
+    const auto until = SteadyClock::now() + pause;
+    {
+      std::unique_lock lock(ctx_mu_);
+      if (stop_cv_.wait_for(lock, config_.reconnect_initial, [this] { return stopping_.load(); })) break;
+    }
+    while (!stopping_ && SteadyClock::now() < until) {
+      const auto slice = std::min<SteadyClock::duration>(until - SteadyClock::now(), std::chrono::milliseconds(20));
+      if (channel_->WaitForConnected(std::chrono::system_clock::now() + slice)) break;
+    }
   }
 }
 
@@ -361,9 +370,9 @@ bool JointStatePublisher::Publish(std::span<const double> positions_rad, std::sp
     seq_ = 0;
   }
   msg_.Clear();
-  if (seq_ == 0) {
-    for (const auto& n : names_) msg_.add_names(n);
-  }
+  // Names on every message: docs/contracts.md lets them be sent once, but ruffini-aggregator 0.1.0 refuses a
+  // state without them (wrong_count); seven short strings a message are cheap.
+  for (const auto& n : names_) msg_.add_names(n);
   for (double q : positions_rad) msg_.add_positions_rad(q);
   for (double v : velocities_rad_s) msg_.add_velocities_rad_s(v);
   msg_.set_t_ns(t_ns);

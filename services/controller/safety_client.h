@@ -210,8 +210,8 @@ class SafetyClient {
   std::thread reader_, watchdog_;
 };
 
-// A client-streaming PublishJointStates writer. The first message of every stream carries the joint names;
-// seq counts from 1 per stream. A failed write ends the stream; the next Publish opens a new one, at most
+// A client-streaming PublishJointStates writer. Every message carries the joint names; seq counts from 1 per
+// stream. A failed write ends the stream; the next Publish opens a new one, at most
 // every retry_pause. Not real-time safe (a gRPC write may block and allocate): call it from a publishing
 // thread, not from the servo loop of a real robot. Not thread-safe: one thread publishes.
 class JointStatePublisher {
