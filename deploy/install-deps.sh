@@ -16,6 +16,7 @@ packages=(
   libboost-dev prometheus-cpp-dev libssl-dev prometheus
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libspdlog-dev liburdfdom-dev liburdfdom-tools liborocos-kdl-dev
+  python3-grpcio python3-protobuf
   clang-14 libclang-rt-14-dev
 )
 if [[ "${1:-}" != "--no-training" ]]; then

@@ -1,0 +1,430 @@
+// Ruffini safety client (safety_client.h). Depends only on gRPC, the ruffini.v1 stubs and the standard library.
+#include "safety_client.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <utility>
+
+namespace ruffini::controller {
+
+namespace v1 = ruffini::v1;
+using std::chrono::nanoseconds;
+
+namespace {
+
+std::string Ms(nanoseconds d) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.1f ms", static_cast<double>(d.count()) / 1e6);
+  return buf;
+}
+
+std::string StatusText(const grpc::Status& s) {
+  static constexpr const char* kCodes[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT", "DEADLINE_EXCEEDED",
+                                           "NOT_FOUND", "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED",
+                                           "FAILED_PRECONDITION", "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED",
+                                           "INTERNAL", "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
+  const int code = static_cast<int>(s.error_code());
+  std::string text = code >= 0 && code <= 16 ? kCodes[code] : "code " + std::to_string(code);
+  if (!s.error_message().empty()) text += ": " + s.error_message();
+  return text;
+}
+
+std::string CauseKindName(v1::SafetyCause::Kind kind) {
+  switch (kind) {
+    case v1::SafetyCause::KIND_CONTACT: return "contact";
+    case v1::SafetyCause::KIND_PATCH_FAULT: return "patch fault";
+    case v1::SafetyCause::KIND_PATCH_SILENT: return "patch silent";
+    case v1::SafetyCause::KIND_PATCH_MISSING: return "patch missing";
+    case v1::SafetyCause::KIND_PATCH_PROTOCOL: return "patch protocol";
+    case v1::SafetyCause::KIND_JOINT_STATES_STALE: return "joint states stale";
+    case v1::SafetyCause::KIND_STARTUP: return "startup";
+    case v1::SafetyCause::KIND_SHUTTING_DOWN: return "shutting down";
+    case v1::SafetyCause::KIND_INTERNAL: return "internal";
+    default: return "unknown";
+  }
+}
+
+}  // namespace
+
+std::string_view HaltReasonName(HaltReason reason) noexcept {
+  switch (reason) {
+    case HaltReason::kNotStarted: return "NOT_STARTED";
+    case HaltReason::kStop: return "STOP";
+    case HaltReason::kFault: return "FAULT";
+    case HaltReason::kUnknownState: return "UNKNOWN_STATE";
+    case HaltReason::kMissedStop: return "MISSED_STOP";
+    case HaltReason::kNoHeartbeat: return "NO_HEARTBEAT";
+    case HaltReason::kStreamEnded: return "STREAM_ENDED";
+    case HaltReason::kConnectFailed: return "CONNECT_FAILED";
+  }
+  return "?";
+}
+
+std::string DescribeState(const v1::SafetyState& s) {
+  std::string out;
+  switch (s.state()) {
+    case v1::SafetyState::STATE_CLEAR: out = "CLEAR"; break;
+    case v1::SafetyState::STATE_STOP: out = "STOP"; break;
+    case v1::SafetyState::STATE_FAULT: out = "FAULT"; break;
+    default: out = "UNKNOWN(" + std::to_string(static_cast<int>(s.state())) + ")"; break;
+  }
+  out += " epoch " + std::to_string(s.stop_epoch());
+  if (s.state() == v1::SafetyState::STATE_CLEAR || !s.has_cause()) return out;
+  const auto& c = s.cause();
+  out += " cause " + CauseKindName(c.kind());
+  if (!c.patch_id().empty()) out += " " + c.patch_id();
+  if (c.kind() == v1::SafetyCause::KIND_CONTACT) {
+    char buf[48];
+    std::snprintf(buf, sizeof buf, " %.2f N > %.2f N", static_cast<double>(c.force_n()),
+                  static_cast<double>(c.threshold_n()));
+    out += buf;
+    if (!c.body_region().empty()) out += " (" + c.body_region() + ")";
+  }
+  return out;
+}
+
+// --- SafetyMonitor ---
+
+SafetyMonitor::SafetyMonitor(MonitorConfig config, SteadyClock::time_point now)
+    : config_(config), halted_since_(now), last_evidence_(now) {
+  config_.states_before_clear = std::max(1, config_.states_before_clear);
+  stats_.halted = true;
+}
+
+nanoseconds SafetyMonitor::Silence(SteadyClock::time_point now) const noexcept {
+  return stream_open_ ? std::chrono::duration_cast<nanoseconds>(now - last_evidence_) : nanoseconds(0);
+}
+
+SafetyMonitor::Action SafetyMonitor::Halt(HaltReason reason, std::string detail, SteadyClock::time_point now,
+                                          nanoseconds silence) {
+  clear_streak_ = 0;
+  const std::uint64_t epoch = stats_.last_state.stop_epoch();
+  const std::int64_t run = stats_.last_state.aggregator_start_t_ns();
+  const bool state_reason = reason == HaltReason::kStop || reason == HaltReason::kFault ||
+                            reason == HaltReason::kUnknownState || reason == HaltReason::kMissedStop;
+  if (halted_ && reason == reason_ && (!state_reason || (epoch == halt_epoch_ && run == halt_run_))) return {};
+  if (!halted_) halted_since_ = now;
+  halted_ = true;
+  reason_ = reason;
+  halt_epoch_ = epoch;
+  halt_run_ = run;
+  ++stats_.halts[static_cast<std::size_t>(reason)];
+  Action a;
+  a.kind = Action::Kind::kHalt;
+  a.halt.reason = reason;
+  a.halt.state = stats_.last_state;
+  a.halt.detail = std::move(detail);
+  a.halt.t = now;
+  a.halt.silence = silence;
+  return a;
+}
+
+SafetyMonitor::Action SafetyMonitor::OnStreamOpened(SteadyClock::time_point now) {
+  stream_open_ = true;
+  stream_has_state_ = false;
+  last_evidence_ = now;
+  clear_streak_ = 0;
+  ++stats_.streams_opened;
+  return {};
+}
+
+SafetyMonitor::Action SafetyMonitor::OnState(const v1::SafetyState& s, SteadyClock::time_point now) {
+  if (!stream_open_) OnStreamOpened(now);  // tolerate a driver that did not say so
+  const bool same_run = stats_.states > 0 && s.aggregator_start_t_ns() == stats_.last_state.aggregator_start_t_ns();
+  if (stream_has_state_) {
+    stats_.max_state_gap = std::max(stats_.max_state_gap, std::chrono::duration_cast<nanoseconds>(now - last_evidence_));
+  }
+  if (same_run && s.seq() > stats_.last_state.seq() + 1) stats_.skipped_states += s.seq() - stats_.last_state.seq() - 1;
+  if (!same_run) have_clear_epoch_ = false;  // a restarted aggregator counts epochs from 1 again
+  ++stats_.states;
+  stats_.last_state = s;
+  stream_has_state_ = true;
+  last_evidence_ = now;
+
+  switch (s.state()) {
+    case v1::SafetyState::STATE_CLEAR: {
+      const bool new_epoch = have_clear_epoch_ && s.stop_epoch() != last_clear_epoch_;
+      have_clear_epoch_ = true;
+      last_clear_epoch_ = s.stop_epoch();
+      if (!halted_) {
+        if (new_epoch) {
+          return Halt(HaltReason::kMissedStop,
+                      "CLEAR with a new stop_epoch: a stop and its reset happened in states not received", now);
+        }
+        return {};
+      }
+      if (++clear_streak_ < config_.states_before_clear) return {};
+      Action a;
+      a.kind = Action::Kind::kClear;
+      a.clear.state = s;
+      a.clear.t = now;
+      a.clear.halted_for = std::chrono::duration_cast<nanoseconds>(now - halted_since_);
+      stats_.time_halted += a.clear.halted_for;
+      ++stats_.clears;
+      halted_ = false;
+      clear_streak_ = 0;
+      return a;
+    }
+    case v1::SafetyState::STATE_STOP: return Halt(HaltReason::kStop, DescribeState(s), now);
+    case v1::SafetyState::STATE_FAULT: return Halt(HaltReason::kFault, DescribeState(s), now);
+    default: return Halt(HaltReason::kUnknownState, DescribeState(s) + " (treated as STOP)", now);
+  }
+}
+
+SafetyMonitor::Action SafetyMonitor::OnStreamEnded(const std::string& detail, SteadyClock::time_point now) {
+  const bool had_state = stream_has_state_;
+  stream_open_ = false;
+  stream_has_state_ = false;
+  return had_state ? Halt(HaltReason::kStreamEnded, "stream ended: " + detail, now)
+                   : Halt(HaltReason::kConnectFailed, "no stream: " + detail, now);
+}
+
+SafetyMonitor::Action SafetyMonitor::OnTick(SteadyClock::time_point now) {
+  if (!stream_open_) return {};
+  // Once halted for the link itself, only a state (or the stream's end) changes the reason.
+  if (halted_ && (reason_ == HaltReason::kNoHeartbeat || reason_ == HaltReason::kStreamEnded ||
+                  reason_ == HaltReason::kConnectFailed)) {
+    return {};
+  }
+  const nanoseconds silence = Silence(now);
+  if (silence <= config_.heartbeat_timeout) return {};
+  return Halt(HaltReason::kNoHeartbeat,
+              "no state for " + Ms(silence) + " (limit " + Ms(config_.heartbeat_timeout) + ")", now, silence);
+}
+
+SafetyStats SafetyMonitor::Stats(SteadyClock::time_point now) const {
+  SafetyStats s = stats_;
+  s.halted = halted_;
+  s.reason = reason_;
+  if (halted_) s.time_halted += std::chrono::duration_cast<nanoseconds>(now - halted_since_);
+  return s;
+}
+
+// --- channel ---
+
+std::shared_ptr<grpc::Channel> MakeAggregatorChannel(const std::string& target,
+                                                     std::shared_ptr<grpc::ChannelCredentials> credentials,
+                                                     std::chrono::milliseconds initial_backoff,
+                                                     std::chrono::milliseconds max_backoff) {
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(initial_backoff.count()));
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(initial_backoff.count()));
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(max_backoff.count()));
+  if (!credentials) credentials = grpc::InsecureChannelCredentials();
+  return grpc::CreateCustomChannel(target, credentials, args);
+}
+
+// --- SafetyClient ---
+
+SafetyClient::SafetyClient(std::shared_ptr<grpc::Channel> channel, SafetyClientConfig config, HaltCallback on_halt,
+                           ClearCallback on_clear)
+    : channel_(std::move(channel)),
+      stub_(v1::Aggregator::NewStub(channel_)),
+      config_(std::move(config)),
+      on_halt_(std::move(on_halt)),
+      on_clear_(std::move(on_clear)),
+      monitor_(config_.monitor, SteadyClock::now()) {
+  stats_ = monitor_.Stats(SteadyClock::now());
+}
+
+SafetyClient::~SafetyClient() { Stop(); }
+
+void SafetyClient::Start() {
+  std::lock_guard lock(mu_);
+  if (started_) return;
+  started_ = true;
+  reader_ = std::thread([this] { ReadLoop(); });
+  watchdog_ = std::thread([this] { WatchdogLoop(); });
+}
+
+void SafetyClient::Stop() {
+  {
+    std::lock_guard lock(ctx_mu_);
+    if (stopping_.exchange(true)) return;
+    if (ctx_) ctx_->TryCancel();
+  }
+  stop_cv_.notify_all();
+  if (reader_.joinable()) reader_.join();
+  if (watchdog_.joinable()) watchdog_.join();
+  halted_.store(true, std::memory_order_release);
+}
+
+SafetyStats SafetyClient::Stats() const {
+  std::lock_guard lock(stats_mu_);
+  return stats_;  // refreshed at every event and every watchdog tick
+}
+
+void SafetyClient::Apply(const SafetyMonitor::Action& a) {
+  {
+    std::lock_guard lock(stats_mu_);
+    stats_ = monitor_.Stats(SteadyClock::now());
+  }
+  if (a.kind == SafetyMonitor::Action::Kind::kHalt) {
+    halted_.store(true, std::memory_order_release);
+    if (on_halt_ && !stopping_) on_halt_(a.halt);
+  } else if (a.kind == SafetyMonitor::Action::Kind::kClear) {
+    if (stopping_) return;
+    halted_.store(false, std::memory_order_release);
+    if (on_clear_) on_clear_(a.clear);
+  }
+}
+
+void SafetyClient::ReadLoop() {
+  auto pause = config_.reconnect_initial;
+  v1::WatchSafetyRequest request;
+  request.set_subscriber(config_.subscriber);
+  while (!stopping_) {
+    grpc::ClientContext ctx;
+    {
+      std::lock_guard lock(ctx_mu_);
+      if (stopping_) break;
+      ctx_ = &ctx;
+    }
+    auto reader = stub_->WatchSafety(&ctx, request);
+    {
+      std::lock_guard lock(mu_);
+      Apply(monitor_.OnStreamOpened(SteadyClock::now()));
+    }
+    bool any = false;
+    v1::SafetyState state;
+    while (reader->Read(&state)) {
+      any = true;
+      std::lock_guard lock(mu_);
+      Apply(monitor_.OnState(state, SteadyClock::now()));
+    }
+    const grpc::Status status = reader->Finish();
+    {
+      std::lock_guard lock(ctx_mu_);
+      ctx_ = nullptr;
+    }
+    if (stopping_) break;  // our own cancel: not a decision to report
+    {
+      std::lock_guard lock(mu_);
+      Apply(monitor_.OnStreamEnded(StatusText(status), SteadyClock::now()));
+    }
+    pause = any ? config_.reconnect_initial : std::min(pause * 2, config_.reconnect_max);
+    // At least reconnect_initial; after that, go as soon as the channel is connected again (the channel
+    // retries on its own backoff), or when the pause is over.
+    const auto until = SteadyClock::now() + pause;
+    {
+      std::unique_lock lock(ctx_mu_);
+      if (stop_cv_.wait_for(lock, config_.reconnect_initial, [this] { return stopping_.load(); })) break;
+    }
+    while (!stopping_ && SteadyClock::now() < until) {
+      const auto slice = std::min<SteadyClock::duration>(until - SteadyClock::now(), std::chrono::milliseconds(20));
+      if (channel_->WaitForConnected(std::chrono::system_clock::now() + slice)) break;
+    }
+  }
+}
+
+void SafetyClient::WatchdogLoop() {
+  auto next = SteadyClock::now();
+  while (!stopping_) {
+    next += config_.watchdog_tick;
+    std::this_thread::sleep_until(next);
+    const auto now = SteadyClock::now();
+    if (next < now - config_.watchdog_tick * 10) next = now;  // the thread was not scheduled: do not catch up
+    bool cancel = false;
+    {
+      std::lock_guard lock(mu_);
+      Apply(monitor_.OnTick(now));
+      cancel = monitor_.Silence(now) > config_.cancel_silent_stream_after;
+      std::lock_guard s(stats_mu_);
+      stats_ = monitor_.Stats(now);
+    }
+    if (cancel) {
+      std::lock_guard lock(ctx_mu_);
+      if (ctx_) ctx_->TryCancel();
+    }
+  }
+}
+
+// --- JointStatePublisher ---
+
+JointStatePublisher::JointStatePublisher(std::shared_ptr<grpc::Channel> channel, std::vector<std::string> joint_names,
+                                         std::chrono::milliseconds retry_pause)
+    : stub_(v1::Aggregator::NewStub(std::move(channel))), names_(std::move(joint_names)), retry_pause_(retry_pause) {}
+
+JointStatePublisher::~JointStatePublisher() {
+  v1::PublishJointStatesResponse ignored;
+  Finish(&ignored);
+}
+
+bool JointStatePublisher::Publish(std::span<const double> positions_rad, std::span<const double> velocities_rad_s,
+                                  std::int64_t t_ns) {
+  if (cancelled_) return false;
+  if (!writer_) {
+    const auto now = SteadyClock::now();
+    if (now < next_try_) {
+      ++failed_;
+      return false;
+    }
+    next_try_ = now + retry_pause_;
+    auto ctx = std::make_unique<grpc::ClientContext>();
+    response_.Clear();
+    auto writer = stub_->PublishJointStates(ctx.get(), &response_);
+    std::lock_guard lock(ctx_mu_);
+    if (cancelled_) return false;
+    ctx_ = std::move(ctx);
+    writer_ = std::move(writer);
+    seq_ = 0;
+  }
+  msg_.Clear();
+  // Names on every message: docs/contracts.md lets them be sent once, but ruffini-aggregator 0.1.0 refuses a
+  // state without them (wrong_count); seven short strings a message are cheap.
+  for (const auto& n : names_) msg_.add_names(n);
+  for (double q : positions_rad) msg_.add_positions_rad(q);
+  for (double v : velocities_rad_s) msg_.add_velocities_rad_s(v);
+  msg_.set_t_ns(t_ns);
+  msg_.set_seq(++seq_);
+  if (!writer_->Write(msg_)) {
+    ++failed_;
+    EndStream();
+    return false;
+  }
+  ++written_;
+  return true;
+}
+
+grpc::Status JointStatePublisher::EndStream() {
+  if (!writer_) return grpc::Status::OK;
+  writer_->WritesDone();
+  const grpc::Status status = writer_->Finish();
+  totals_.set_received(totals_.received() + response_.received());
+  totals_.set_accepted(totals_.accepted() + response_.accepted());
+  totals_.set_rejected(totals_.rejected() + response_.rejected());
+  if (!response_.last_rejection().empty()) totals_.set_last_rejection(response_.last_rejection());
+  response_.Clear();
+  std::lock_guard lock(ctx_mu_);
+  writer_.reset();
+  ctx_.reset();
+  return status;
+}
+
+grpc::Status JointStatePublisher::Finish(v1::PublishJointStatesResponse* totals) {
+  const grpc::Status status = EndStream();
+  if (totals) *totals = totals_;
+  return status;
+}
+
+void JointStatePublisher::Cancel() {
+  std::lock_guard lock(ctx_mu_);
+  cancelled_ = true;
+  if (ctx_) ctx_->TryCancel();
+}
+
+// --- ResetStop ---
+
+grpc::Status ResetStop(v1::Aggregator::Stub& stub, std::uint64_t stop_epoch, const std::string& operator_name,
+                       const std::string& operator_note, v1::ResetStopResponse* response,
+                       std::chrono::milliseconds timeout) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + timeout);
+  v1::ResetStopRequest request;
+  request.set_stop_epoch(stop_epoch);
+  request.set_operator_name(operator_name);
+  request.set_operator_note(operator_note);
+  return stub.ResetStop(&ctx, request, response);
+}
+
+}  // namespace ruffini::controller
