@@ -76,6 +76,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
     finishing_ = true;
     final_ = status;
     if (!writing_) {
+      finished_ = true;  // exactly one Finish: OnWriteDone must not finish again
       if (pending_) {
         current_ = *pending_;
         pending_.reset();
@@ -90,6 +91,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
   void OnWriteDone(bool ok) override {
     std::lock_guard lock(guard_->mu);
     writing_ = false;
+    if (finished_) return;  // the last write went out with StartWriteAndFinish
     if (!ok) {
       if (!finished_) {
         finished_ = true;

@@ -159,6 +159,13 @@ TEST_F(CoreTest, JointStatesAreValidated) {
   EXPECT_EQ(core.OnJointState(nan, kT0), aggregate::JointRejection::kNotFinite);
   EXPECT_EQ(core.counters().joint_states[0], 1u);
   EXPECT_EQ(core.OnJointState(Joints(kT0 + kMs, 0.2), kT0 + kMs), aggregate::JointRejection::kNone);
+  // Names sent once, then left empty: the robot's order.
+  auto unnamed = Joints(kT0 + 2 * kMs, 0.3);
+  unnamed.clear_names();
+  EXPECT_EQ(core.OnJointState(unnamed, kT0 + 2 * kMs), aggregate::JointRejection::kNone);
+  unnamed.set_t_ns(kT0 + 3 * kMs);
+  unnamed.mutable_positions_rad()->RemoveLast();
+  EXPECT_EQ(core.OnJointState(unnamed, kT0 + 3 * kMs), aggregate::JointRejection::kWrongCount);
 }
 
 TEST_F(CoreTest, ContactsArePlacedWithTheJointStateAtTheirTime) {

@@ -263,11 +263,13 @@ JointRejection Core::OnJointState(const v1::JointState& js, std::int64_t now_ns)
   if (!setup_.robot) return reject(JointRejection::kNoRobot);
   const robot::Model& model = *setup_.robot;
   const std::size_t n = model.num_dof();
-  if (static_cast<std::size_t>(js.positions_rad_size()) != n || static_cast<std::size_t>(js.names_size()) != n) {
+  // Names may be left empty: then the positions are in the robot's order (AggregatorStatus.joint_names).
+  const bool named = js.names_size() > 0;
+  if (static_cast<std::size_t>(js.positions_rad_size()) != n || (named && static_cast<std::size_t>(js.names_size()) != n)) {
     return reject(JointRejection::kWrongCount);
   }
   for (std::size_t i = 0; i < n; ++i) {
-    if (js.names(static_cast<int>(i)) != model.dof_joint(i).name) return reject(JointRejection::kWrongNames);
+    if (named && js.names(static_cast<int>(i)) != model.dof_joint(i).name) return reject(JointRejection::kWrongNames);
     if (!std::isfinite(js.positions_rad(static_cast<int>(i)))) return reject(JointRejection::kNotFinite);
   }
   if (!joints_.empty() && js.t_ns() <= joints_.back().t_ns) return reject(JointRejection::kNotMonotonic);
