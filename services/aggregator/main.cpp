@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 
 #include "ruffini/error.h"
@@ -53,7 +54,11 @@ int main(int argc, char** argv) {
     spdlog::info("signal {}: sending FAULT to every subscriber and stopping", sig);
     server.Stop();
     spdlog::info("stopped");
-    return 0;
+    // Everything is closed and joined. Exit without the remaining destructors: the metrics exposer's web
+    // server (civetweb) waits out its one-second poll timeout when stopped, which would hold up every restart.
+    spdlog::shutdown();
+    std::fflush(nullptr);
+    std::_Exit(0);
   } catch (const ruffini::InputError& e) {
     spdlog::error("{}", e.what());
     return 1;

@@ -6,6 +6,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <string>
 
@@ -34,7 +35,7 @@ int main(int argc, char** argv) {
   app.add_option("--rate-hz", config.rate_hz, "The interrogator's frame rate, Hz")->capture_default_str();
   app.add_option("--heartbeat-ms", config.heartbeat_ms, "Heartbeat period to the aggregator, ms")->capture_default_str();
   app.add_option("--silence-ms", config.silence_ms,
-                 "Interrogator silence before a fault, ms (default: 3 frame periods)");
+                 "Interrogator silence before a fault, ms (default: 3 frame periods, at least 15 ms)");
   app.add_option("--reject-fault-frames", config.reject_fault_frames,
                  "Frames rejected in a row before a fault (default: 20 ms of frames, at least 3)");
   app.add_option("--ports-file", ports_file, "Write the chosen metrics port here ('metrics P')");
@@ -55,7 +56,11 @@ int main(int argc, char** argv) {
     spdlog::info("signal {}: stopping", sig);
     service.Stop();
     spdlog::info("stopped");
-    return 0;
+    // Everything is closed and joined. Exit without the remaining destructors: the metrics exposer's web
+    // server (civetweb) waits out its one-second poll timeout when stopped, which would hold up every restart.
+    spdlog::shutdown();
+    std::fflush(nullptr);
+    std::_Exit(0);
   } catch (const ruffini::InputError& e) {
     spdlog::error("{}", e.what());
     return 1;

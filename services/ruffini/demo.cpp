@@ -413,7 +413,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   // --- Shut down: everything by pid; the aggregator last (its subscribers get FAULT, then the stream ends).
   log("stopping: controller, decoders, sim, aggregator");
   const int controller_exit = controller.Stop();
-  for (auto& [name, d] : decoders) d->Stop();
+  for (auto& [name, d] : decoders) d->Stop(std::chrono::milliseconds(3000));
   sim.Stop();
   aggregator.Stop(3000ms);
   WaitUntil([&] { return observer.safety_ended(); }, 3s, 10ms);
@@ -567,7 +567,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
         << "| touch | truth | frames | from two patches | error median / p90 (mm) |\n| --- | --- | --- | --- | --- |\n"
         << "| light, interior (" << patches[0] << " Y 60 mm, R 60 deg) | that point | " << n_i << " | " << fused_i
         << " | " << Fmt("%.1f", med(interior)) << " / " << Fmt("%.1f", p90(interior)) << " |\n"
-        << "| hard, on the seam (2.5 N at R 135 deg of one patch and R 10 deg of the other) | the seam at Y 75 mm | "
+        << "| hard, on the seam (2.5 N at R 144 deg of one patch and R 1 deg of the other) | the seam at Y 75 mm | "
         << n_s << " | " << fused_s << " | " << Fmt("%.1f", med(seam)) << " / " << Fmt("%.1f", p90(seam)) << " |\n\n"
         << "During the seam hold, " << sets_one << " of " << sets_seam
         << " contact sets with a forearm contact had exactly one (the two patches' contacts fused into one).\n";

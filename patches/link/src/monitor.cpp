@@ -128,10 +128,12 @@ MonitorConfig Resolved(MonitorConfig c) {
   if (c.silence_deadline_ns < 0) throw InputError("silence deadline must not be negative");
   if (c.reject_fault_frames < 0) throw InputError("reject_fault_frames must not be negative");
   const double period_ns = 1e9 / c.sample_rate_hz;
-  // 3 frame periods, but at least 5 ms: at 5 kHz 3 periods are 0.6 ms, and a general-purpose OS's wake-up
-  // jitter tripped that about five times a second (docs/bench/service.md); every such fault latches the robot.
+  // 3 frame periods, but at least 15 ms: at 5 kHz 3 periods are 0.6 ms, and a general-purpose OS's wake-up
+  // jitter tripped that about five times a second (docs/bench/service.md); 5 ms still tripped in the demo on a
+  // loaded 2-core machine. Every such fault latches the robot. 15 ms keeps the aggregator's 30 ms patch
+  // watchdog and the 50 ms fault budget.
   if (c.silence_deadline_ns == 0) {
-    c.silence_deadline_ns = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil(3.0 * period_ns)), 5'000'000);
+    c.silence_deadline_ns = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil(3.0 * period_ns)), 15'000'000);
   }
   if (c.reject_fault_frames == 0) c.reject_fault_frames = std::max(3, static_cast<int>(std::lround(0.02 * c.sample_rate_hz)));
   if (!(c.capture_deadline_s > 0)) throw InputError("capture deadline must be positive");

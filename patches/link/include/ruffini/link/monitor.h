@@ -69,7 +69,7 @@ std::unique_ptr<FramePipeline> MakePipeline(const v1::DecoderModel& model, const
 struct MonitorConfig {
   double sample_rate_hz = 1000.0;
   std::int64_t heartbeat_period_ns = 10'000'000;  // 10 ms
-  std::int64_t silence_deadline_ns = 0;           // 0: 3 frame periods, at least 5 ms
+  std::int64_t silence_deadline_ns = 0;           // 0: 3 frame periods, at least 15 ms
   int reject_fault_frames = 0;                    // 0: 20 ms of frames, at least 3
   double capture_deadline_s = 10.0;
   std::int64_t overload_hold_ns = 1'000'000'000;  // an overload fault lasts this long after the last drop
