@@ -143,6 +143,7 @@ struct Stats {
   std::atomic<std::uint64_t> messages{0}, hellos_accepted{0}, hellos_refused{0}, protocol_errors{0};
   std::atomic<std::uint64_t> joint_accepted{0}, joint_rejected{0};
   std::atomic<std::uint64_t> subscriber_drops{0};
+  std::atomic<std::uint64_t> fusion_updates{0}, fusion_inputs{0}, fusion_merges{0}, fusion_rejected{0};
   std::atomic<int> safety_subscribers{0}, contact_subscribers{0};
   std::vector<std::string> patch_ids, patch_regions;
   std::unique_ptr<std::atomic<std::uint64_t>[]> contacts;   // contact onsets per patch
@@ -231,6 +232,15 @@ class StatsCollectable final : public prometheus::Collectable {
     one("ruffini_aggregator_safety_subscribers", "WatchSafety streams open.", MetricType::Gauge, s_.safety_subscribers.load());
     one("ruffini_aggregator_contact_subscribers", "WatchContacts streams open.", MetricType::Gauge,
         s_.contact_subscribers.load());
+    one("ruffini_aggregator_fusion_updates_total", "Fusion passes over the patches in contact.", MetricType::Counter,
+        u(s_.fusion_updates));
+    one("ruffini_aggregator_fusion_inputs_total", "Patch contacts fed to the fusion.", MetricType::Counter,
+        u(s_.fusion_inputs));
+    one("ruffini_aggregator_fusion_merges_total",
+        "Pairs of patch contacts fused into one body contact (a touch across a seam).", MetricType::Counter,
+        u(s_.fusion_merges));
+    one("ruffini_aggregator_fusion_rejected_total", "Patch contacts the fusion refused (bad input).",
+        MetricType::Counter, u(s_.fusion_rejected));
     one("ruffini_aggregator_subscriber_drops_total", "Subscribers finished because a write was stuck past its deadline.",
         MetricType::Counter, u(s_.subscriber_drops));
     {
@@ -585,6 +595,12 @@ void AggregatorServer::Impl::CopyStats() {
   std::uint64_t rejected = 0;
   for (std::size_t i = 1; i < c.joint_states.size(); ++i) rejected += c.joint_states[i];
   stats.joint_rejected = rejected;
+  if (const auto* f = core->fusion_counters()) {
+    stats.fusion_updates = f->updates;
+    stats.fusion_inputs = f->inputs;
+    stats.fusion_merges = f->merges;
+    stats.fusion_rejected = f->rejected_total();
+  }
   const auto status_patches = core->policy().config().patches.size();
   const auto patches = core->Status(Now());
   for (std::size_t i = 0; i < status_patches; ++i) {
