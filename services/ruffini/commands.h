@@ -8,6 +8,7 @@ void RegisterTwinCommands(CLI::App& app);
 void RegisterDecodeCommands(CLI::App& app);
 void RegisterBenchCommand(CLI::App& app);
 void RegisterBenchServiceCommand(CLI::App& app);
+void RegisterBenchAggregatorCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
 
 }  // namespace ruffini::cli

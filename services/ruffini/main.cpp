@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   ruffini::cli::RegisterDecodeCommands(app);
   ruffini::cli::RegisterBenchCommand(app);
   ruffini::cli::RegisterBenchServiceCommand(app);
+  ruffini::cli::RegisterBenchAggregatorCommand(app);
   ruffini::cli::RegisterDemoCommand(app);
   try {
     app.parse(argc, argv);
