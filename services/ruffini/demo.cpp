@@ -317,7 +317,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   std::vector<double> stop_latency_ms;
   {
     const std::int64_t from = service::UnixNowNs();
-    Event e{"hard touch on the forearm seam (2.5 N each side)", "STOP (contact above 1.5 N)", 0, false, ""};
+    Event e{"hard touch on the forearm seam (3.5 N each side)", "STOP (contact above 1.5 N)", 0, false, ""};
     std::optional<SafetyRecord> stop;
     WaitUntil([&] {
       stop = first_after(from, [](const v1::SafetyState& s) { return s.state() != v1::SafetyState::STATE_CLEAR; });
@@ -569,7 +569,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
         << "| touch | truth | frames | from two patches | error median / p90 (mm) |\n| --- | --- | --- | --- | --- |\n"
         << "| light, interior (" << patches[0] << " Y 60 mm, R 60 deg) | that point | " << n_i << " | " << fused_i
         << " | " << Fmt("%.1f", med(interior)) << " / " << Fmt("%.1f", p90(interior)) << " |\n"
-        << "| hard, on the seam (2.5 N at R 144 deg of one patch and R 1 deg of the other) | the seam at Y 75 mm | "
+        << "| hard, on the seam (3.5 N at R 138 deg of one patch and R 7 deg of the other) | the seam at Y 75 mm | "
         << n_s << " | " << fused_s << " | " << Fmt("%.1f", med(seam)) << " / " << Fmt("%.1f", p90(seam)) << " |\n\n"
         << "During the seam hold, " << sets_one << " of " << sets_seam
         << " contact sets with a forearm contact had exactly one (the two patches' contacts fused into one).\n\n"
