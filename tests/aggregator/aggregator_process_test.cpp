@@ -308,6 +308,44 @@ TEST(AggregatorProcess, MetricsPassPromtool) {
   EXPECT_EQ(std::system(("promtool check metrics < " + dir + "/scrape.txt").c_str()), 0) << text;
 }
 
+TEST(AggregatorProcess, ASubscriberThatStopsReadingIsDroppedNotWaitedFor) {
+  const std::string dir = (fs::current_path() / "aggregator_stuck").string();
+  int grpc_port = 0;
+  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+                                    "127.0.0.1:0"},
+                                   dir, "grpc", grpc_port);
+  const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
+  // A subscriber that never reads: a small, fixed flow-control window (no BDP probing), so the aggregator's
+  // writes back up after a few hundred states and one stays in flight past the 50 ms write deadline.
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 1024);
+  auto channel = grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+  auto stub = v1::Aggregator::NewStub(channel);
+  grpc::ClientContext ctx;
+  v1::WatchSafetyRequest req;
+  req.set_subscriber("never reads");
+  auto reader = stub->WatchSafety(&ctx, req);
+  // A well-behaved subscriber keeps getting its heartbeats meanwhile.
+  Controller good(address);
+  const int metrics = rt::ReadPorts(dir + "/ports")["metrics"];
+  auto drops = [&] {
+    const std::string text = rt::Scrape(metrics);
+    const std::string series = "\nruffini_aggregator_subscriber_drops_total ";  // the sample, not # HELP
+    const auto at = text.find(series);
+    return at == std::string::npos ? 0.0 : std::stod(text.substr(at + series.size()));
+  };
+  ASSERT_TRUE(rt::WaitFor([&] { return drops() >= 1.0; }, 30s, 100ms)) << agg.stderr_text();
+  const std::size_t before = good.Snapshot().size();
+  ASSERT_TRUE(rt::WaitFor([&] { return good.Snapshot().size() >= before + 5; }, 2s));
+  EXPECT_FALSE(good.ended());
+  // The stuck subscriber's stream ends with an error once it reads again: its controller would stop.
+  v1::SafetyState s;
+  while (reader->Read(&s)) {
+  }
+  EXPECT_FALSE(reader->Finish().ok());
+}
+
 TEST(AggregatorProcess, ASceneWithoutSafetyIsAClearError) {
   const std::string dir = (fs::current_path() / "aggregator_nosafety").string();
   fs::create_directories(dir);
