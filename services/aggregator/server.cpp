@@ -22,6 +22,7 @@
 #include <thread>
 
 #include "ruffini/error.h"
+#include "ruffini/service/process_metrics.h"
 #include "ruffini/service/atomic_histogram.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 
@@ -693,6 +694,7 @@ AggregatorServer::AggregatorServer(ServerConfig config, aggregate::Setup setup) 
   }
   s.collectable = std::make_shared<StatsCollectable>(s.stats);
   s.exposer->RegisterCollectable(s.collectable);
+  s.exposer->RegisterCollectable(service::ProcessMetrics());  // process_cpu_seconds_total, memory, fds
 }
 
 AggregatorServer::~AggregatorServer() { Stop(); }

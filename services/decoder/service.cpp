@@ -17,6 +17,7 @@
 
 #include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
+#include "ruffini/service/process_metrics.h"
 #include "ruffini/ingest/hyperion.h"
 #include "ruffini/link/to_proto.h"
 #include "ruffini/twin/scene.h"
@@ -570,6 +571,7 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
                                                        {"model_sha256", s.model_sha256.substr(0, 16)},
                                                        {"version", kVersion}});
   s.exposer->RegisterCollectable(s.collectable);
+  s.exposer->RegisterCollectable(service::ProcessMetrics());  // process_cpu_seconds_total, memory, fds
 
   grpc::ChannelArguments args;
   // gRPC's default reconnect backoff (1 s growing to 120 s) is far too slow for a safety link.
