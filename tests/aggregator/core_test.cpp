@@ -241,6 +241,10 @@ TEST_F(CoreTest, AHardContactStopsAndTheLatencyIsMeasured) {
   EXPECT_FLOAT_EQ(st.cause().threshold_n(), 1.5f);
   EXPECT_EQ(core.TakeStopLatencyNs(), 400'000);
   EXPECT_EQ(core.TakeStopLatencyNs(), -1);
+  // The same STOP published again (heartbeats, another frame above threshold) is not a new sample.
+  core.Publish(t + 10 * kMs);
+  Send(streams[0], 0, hard, t + 11 * kMs);
+  EXPECT_EQ(core.TakeStopLatencyNs(), -1);
   // A NaN force is never sent as NaN.
   v1::PatchMessage nan;
   nan.set_t_ns(t + 2 * kMs);

@@ -75,7 +75,10 @@ void Core::Note(const safety::Step& step) {
   if (!step.publish) return;
   changed_ = true;
   const auto& s = data_.state();
-  if (s.state == safety::State::kStop && s.cause.kind == safety::CauseKind::kContact && s.cause.t_ns > 0) {
+  // Once per STOP (its epoch), when it latches; later publications of the same STOP are not new samples.
+  if (s.state == safety::State::kStop && s.cause.kind == safety::CauseKind::kContact && s.cause.t_ns > 0 &&
+      s.stop_epoch != latency_epoch_) {
+    latency_epoch_ = s.stop_epoch;
     stop_latency_ns_ = data_.now_ns() - s.cause.t_ns;
   }
 }

@@ -166,6 +166,7 @@ class Core {
   std::uint64_t contact_ids_ = 0;
   bool changed_ = true;
   std::int64_t stop_latency_ns_ = -1;
+  std::uint64_t latency_epoch_ = 0;  // the STOP whose latency was taken
   std::string last_protocol_error_;
 };
 
