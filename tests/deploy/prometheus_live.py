@@ -74,7 +74,7 @@ def metric_names(expr):
     e = re.sub(r"\[[^\]]*\]", "", e)
     e = re.sub(r"\b(by|without|on|ignoring|group_left|group_right)\s*\([^)]*\)", "", e)
     names = set()
-    for m in re.finditer(r"[A-Za-z_:][A-Za-z0-9_:]*", e):
+    for m in re.finditer(r"(?<![A-Za-z0-9_:.])[A-Za-z_:][A-Za-z0-9_:]*", e):  # not a duration such as 5m
         rest = e[m.end():].lstrip()
         if rest.startswith("(") or m.group(0).lower() in KEYWORDS:
             continue
