@@ -25,7 +25,7 @@ const YAML = require("yaml");
 const args = {};
 for (let i = 2; i < process.argv.length; i += 2) args[process.argv[i].replace(/^--/, "")] = process.argv[i + 1];
 const problems = [];
-const notes = [];
+const notes = new Set();
 const fail = (where, msg) => problems.push(`${where}: ${msg}`);
 
 const docs = YAML.parseAllDocuments(fs.readFileSync(args.rendered, "utf8"))
@@ -77,6 +77,8 @@ function help(exe) {
   }
   return helpCache[exe];
 }
+// A name in the Containerfile as a whole word ("ruffini-decode" is not "ruffini-decoder").
+const installs = (name) => new RegExp(`(^|[^\\w-])${name.replace(/[-.]/g, "\\$&")}(?![\\w-])`, "m").test(containerfile);
 const flagIn = (text, flag) => new RegExp(`(^|[\\s,\\[])${flag.replace(/-/g, "\\-")}(?![\\w-])`, "m").test(text);
 
 const configMaps = Object.fromEntries(all("ConfigMap").map((c) => [c.metadata.name, c.data || {}]));
@@ -113,7 +115,7 @@ for (const d of all("Deployment")) {
     const cmd = c.command || [];
     const exe = path.basename(cmd[0] || "");
     if (cmd.length !== 1 || !cmd[0].startsWith("/usr/local/bin/")) fail(cid, `command ${JSON.stringify(cmd)} is not one /usr/local/bin/ executable`);
-    if (!containerfile.includes(exe)) fail(cid, `${exe} is not installed by deploy/container/Containerfile`);
+    if (!exe || !installs(exe)) fail(cid, `${exe} is not installed by deploy/container/Containerfile`);
     const text = help(exe);
     if (text === null) {
       fail(cid, `${exe} --help was not captured (is ${exe} built?)`);
@@ -134,7 +136,7 @@ for (const d of all("Deployment")) {
       const accepted = flagIn(text, flag);
       if (isPending(exe, flag)) {
         if (accepted) fail(cid, `${flag} is in deploy/k8s/pending-flags.txt but ${exe} now accepts it: remove it from the list`);
-        else notes.push(`${exe} ${flag}: PENDING (the manifests need it; ${exe} --help does not list it yet)`);
+        else notes.add(`${exe} ${flag}: PENDING (the manifests need it; ${exe} --help does not list it yet)`);
       } else if (!accepted) fail(cid, `${exe} does not accept ${flag} (not in its --help)`);
     }
     // Resolve env values (configMapKeyRef) to check the robot's settings.
@@ -167,7 +169,7 @@ for (const d of all("Deployment")) {
       if (port !== undefined && !portOf(port)) fail(cid, `${pname} port ${port} is not a container port`);
       if (p.exec) {
         const pc = p.exec.command || [];
-        if (!pc[0] || !pc[0].startsWith("/usr/local/bin/") || !containerfile.includes(path.basename(pc[0])))
+        if (!pc[0] || !pc[0].startsWith("/usr/local/bin/") || !installs(path.basename(pc[0])))
           fail(cid, `${pname} runs ${pc[0]}, which deploy/container/Containerfile does not install`);
         const script = path.join(args.repo, "deploy/container", path.basename(pc[0] || ""));
         if (!fs.existsSync(script)) fail(cid, `${pname}: ${script} does not exist`);
@@ -182,7 +184,7 @@ for (const d of all("Deployment")) {
     const tlsMount = (c.volumeMounts || []).find((m) => m.mountPath === "/etc/ruffini/tls");
     if (!tlsMount || !tlsMount.readOnly) fail(cid, "no read-only volume mounted at /etc/ruffini/tls");
     else if (!(volumes[tlsMount.name] && volumes[tlsMount.name].secret)) fail(cid, "/etc/ruffini/tls is not a Secret volume");
-    else notes.push(`${d.metadata.name}: needs Secret ${volumes[tlsMount.name].secret.secretName} (ca.crt, tls.crt, tls.key)`);
+    else notes.add(`${d.metadata.name}: needs Secret ${volumes[tlsMount.name].secret.secretName} (ca.crt, tls.crt, tls.key)`);
     // The scene.
     const scene = val("--scene");
     if (!scene.startsWith(sceneRoot)) fail(cid, `--scene ${scene} is not under ${sceneRoot} (baked into the image)`);
@@ -220,7 +222,7 @@ if (decoders.length) {
     if (other) fail(dec.id, `${key} is also read by ${other.id}`);
   }
   for (const p of patches) if (!seen[p]) fail(`overlay ${args.overlay}`, `the scene's patch ${p} has no decoder`);
-  notes.push(`${decoders.length} decoders for ${patches.length} scene patches`);
+  notes.add(`${decoders.length} decoders for ${patches.length} scene patches`);
 }
 
 // 3. Services and NetworkPolicies against the pods they select.
