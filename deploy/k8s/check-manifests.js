@@ -256,6 +256,41 @@ for (const np of all("NetworkPolicy")) {
     }
 }
 
+// The compose demo (deploy/container/compose.yaml) runs today's executables: every flag must be accepted now
+// (no pending ones), each decoder's healthcheck must read its --metrics port, and Prometheus must scrape every
+// service's --metrics port by its compose name.
+if (args.compose) {
+  const compose = YAML.parse(fs.readFileSync(args.compose, "utf8"), { merge: true });
+  const metricsPorts = [];
+  for (const [name, svc] of Object.entries(compose.services || {})) {
+    const id = `compose service ${name}`;
+    const cmd = svc.command || [];
+    if (!String(cmd[0] || "").startsWith("/usr/local/bin/ruffini")) continue;
+    const exe = path.basename(cmd[0]);
+    if (!installs(exe)) fail(id, `${exe} is not installed by deploy/container/Containerfile`);
+    if (!/^(localhost\/)?ruffini\/ruffini(:|$)/.test(svc.image || "")) fail(id, `image ${svc.image} is not ruffini/ruffini`);
+    const text = help(exe);
+    if (text === null) { fail(id, `${exe} --help was not captured`); continue; }
+    let metrics = null;
+    for (let i = 1; i < cmd.length; i++) {
+      const a = String(cmd[i]);
+      if (!a.startsWith("--")) continue;
+      if (a === "--insecure") fail(id, "--insecure");
+      if (!flagIn(text, a)) fail(id, `${exe} does not accept ${a} (not in its --help)`);
+      if (a === "--metrics") metrics = String(cmd[i + 1]).split(":").pop();
+    }
+    if (metrics) metricsPorts.push(`${name}:${metrics}`);
+    const hc = svc.healthcheck && svc.healthcheck.test;
+    if (exe === "ruffini-decoder" && !(hc && hc.includes("/usr/local/bin/ruffini-ready") && hc.includes(metrics)))
+      fail(id, `healthcheck ${JSON.stringify(hc)} does not run ruffini-ready on the --metrics port ${metrics}`);
+  }
+  const promFile = path.join(path.dirname(args.compose), "prometheus-compose.yml");
+  const prom = fs.existsSync(promFile) ? fs.readFileSync(promFile, "utf8") : "";
+  for (const target of metricsPorts)
+    if (!prom.includes(`"${target}"`)) fail(promFile, `does not scrape ${target}`);
+  notes.add(`compose: ${metricsPorts.length} metrics endpoints scraped, every flag accepted today`);
+}
+
 const counts = Object.entries(byKind).map(([k, v]) => `${v.length} ${k}`).join(", ");
 for (const n of notes) console.log(`  note: ${n}`);
 if (problems.length) {

@@ -2,7 +2,7 @@
 # Renders every overlay in deploy/k8s/overlays with `kubectl kustomize` and checks the objects with
 # deploy/k8s/check-manifests.js: the Kubernetes schemas (npm kubernetes-models), and that images, commands,
 # flags, ports, probes, ConfigMap keys and the scene's patches match what the executables accept (their
-# --help). kubernetes-models and yaml come from npm into the git-ignored tools folder (<repo>/.tools/k8s;
+# --help); and the compose demo's commands (deploy/container/compose.yaml) against the same --help. kubernetes-models and yaml come from npm into the git-ignored tools folder (<repo>/.tools/k8s;
 # RUFFINI_TOOLS_DIR overrides <repo>/.tools), installed on first use, as deploy/lint-proto.sh does for buf.
 # Usage: deploy/k8s/check.sh [--bin DIR]   (DIR: the built executables; default <repo>/build/release/bin)
 # Exit codes: 0 clean; 1 findings (printed); 2 usage; 77 could not run (no kubectl, node or npm, or the npm
@@ -47,6 +47,6 @@ for overlay in "$repo"/deploy/k8s/overlays/*/; do
     echo "k8s-check: FAIL: kubectl kustomize $overlay"; cat "$work/$name.err"; status=1; continue
   fi
   NODE_PATH=$tools/node_modules node "$repo/deploy/k8s/check-manifests.js" --rendered "$work/$name.yaml" \
-    --help-dir "$work" --repo "$repo" --overlay "$name" || status=1
+    --help-dir "$work" --repo "$repo" --overlay "$name" --compose "$repo/deploy/container/compose.yaml" || status=1
 done
 exit "$status"
