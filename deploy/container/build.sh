@@ -34,5 +34,5 @@ if ((with_prometheus)); then
   echo "build: localhost/ruffini/prometheus:$tag, $(( $(podman image inspect --format '{{.Size}}' "localhost/ruffini/prometheus:$tag") / 1000000 )) MB"
 fi
 # The runtime stage must run as non-root and hold no compiler.
-podman --runtime runc run --rm --ulimit nofile=4096:4096 "$image" sh -c \
+podman --runtime runc run --rm --ulimit nofile=4096:4096 --ulimit nproc=4096:4096 "$image" sh -c \
   'id -u; for c in cc gcc c++ g++ clang; do command -v $c && exit 1; done; ls /usr/local/bin /etc/ruffini/config'
