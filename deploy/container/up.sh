@@ -9,7 +9,11 @@ set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 export CONTAINERS_CONF=$here/containers.conf
 compose=(podman-compose -f "$here/compose.yaml" -p ruffini)
-if [[ "${1:-}" == "--down" ]]; then "${compose[@]}" down; exit 0; fi
+if [[ "${1:-}" == "--down" ]]; then
+  "${compose[@]}" down
+  podman network rm ruffini_default >/dev/null 2>&1 || true   # podman-compose 1.0.3 leaves its network behind
+  exit 0
+fi
 
 if ! podman image exists localhost/ruffini/ruffini:dev || ! podman image exists localhost/ruffini/prometheus:dev; then
   "$here/build.sh" --prometheus
