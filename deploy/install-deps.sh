@@ -7,6 +7,9 @@
 # clang-14 is only for the Hyperion codec's libFuzzer target (tests/fuzz); libclang-rt-14-dev holds libFuzzer
 # and the sanitizer runtimes (clang-14 only recommends it, and we install without recommends). Without them the
 # fuzz test reports SKIPPED.
+# kubernetes-client (kubectl: `kubectl kustomize` renders deploy/k8s for the deploy.k8s_manifests test) is skipped
+# when another package already provides /usr/bin/kubectl (e.g. Google's `kubectl`, which conflicts with it).
+# podman, mmdebstrap and podman-compose (deploy/container) are not installed here: docs/deploy.md lists them.
 set -euo pipefail
 
 packages=(
@@ -19,6 +22,10 @@ packages=(
   python3-grpcio python3-protobuf
   clang-14 libclang-rt-14-dev
 )
+if dpkg-query -W -f='${Status}' kubernetes-client 2>/dev/null | grep -q "install ok installed" \
+    || ! command -v kubectl >/dev/null 2>&1; then
+  packages+=(kubernetes-client)
+fi
 if [[ "${1:-}" != "--no-training" ]]; then
   packages+=(libtorch-dev)
 fi
