@@ -212,6 +212,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   const std::string killed_patch = patches.back();
   const fs::path out = o.out_dir;
   const fs::path run = out / "logs";
+  fs::remove_all(run);  // an earlier run's ports files would point at ports nobody listens on now
   fs::create_directories(run);
   auto exe = [&](const char* name) { return (fs::path(o.bin_dir) / name).string(); };
   const std::string rate = std::to_string(static_cast<int>(o.rate_hz));
