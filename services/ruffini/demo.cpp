@@ -218,7 +218,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
 
   // --- Start-up ---------------------------------------------------------------------------------------
   log("starting ruffini-aggregator (" + o.scene_path + ")");
-  Child aggregator({exe("ruffini-aggregator"), "--scene", o.scene_path, "--listen", "127.0.0.1:0", "--metrics",
+  Child aggregator({exe("ruffini-aggregator"), "--insecure", "--scene", o.scene_path, "--listen", "127.0.0.1:0", "--metrics",
                     "127.0.0.1:0", "--ports-file", (run / "aggregator" / "ports").string()},
                    (run / "aggregator").string());
   const int grpc_port = aggregator.WaitPort((run / "aggregator" / "ports").string(), "grpc", 15s);
@@ -226,7 +226,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
   Observer observer(address);
   log("aggregator on " + address + "; starting ruffini-controller (joint states at " + rate + " Hz)");
-  Child controller({exe("ruffini-controller"), "--aggregator", address, "--rate-hz", rate},
+  Child controller({exe("ruffini-controller"), "--insecure", "--aggregator", address, "--rate-hz", rate},
                    (run / "controller").string());
   log("starting ruffini-sim (" + o.scenario_path + ", " + rate + " Hz)");
   Child sim({exe("ruffini-sim"), "--scene", o.scene_path, "--scenario", o.scenario_path, "--rate-hz", rate,
@@ -238,7 +238,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   std::map<std::string, std::unique_ptr<Child>> decoders;
   auto start_decoder = [&](const std::string& patch) {
     decoders[patch] = std::make_unique<Child>(
-        std::vector<std::string>{exe("ruffini-decoder"), "--scene", o.scene_path, "--patch", patch, "--interrogator",
+        std::vector<std::string>{exe("ruffini-decoder"), "--insecure", "--scene", o.scene_path, "--patch", patch, "--interrogator",
                                  "127.0.0.1:" + std::to_string(stream_port), "--aggregator", address, "--metrics",
                                  "127.0.0.1:0", "--rate-hz", rate},
         (run / ("decoder-" + patch)).string());
