@@ -268,6 +268,27 @@ TEST_F(TlsProcess, AServiceWithoutTlsDirOrInsecureRefusesToStart) {
   EXPECT_NE(agg.stderr_text().find("--tls-dir DIR (mutual TLS) and --insecure"), std::string::npos) << agg.stderr_text();
 }
 
+// The other way round: a client refuses an aggregator whose certificate comes from another CA;
+// ruffini-controller says it could not reach the aggregator and exits 1.
+TEST_F(TlsProcess, AClientRefusesAnAggregatorFromAnotherCa) {
+  const Certs& certs = MakeCerts();
+  const std::string base = (fs::current_path() / "tls_rogue_server").string();
+  int port = 0;
+  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--tls-dir", certs.rogue, "--scene", kScene, "--listen",
+                                    "127.0.0.1:0", "--metrics", "127.0.0.1:0"},
+                                   base + "/aggregator", "grpc", port);
+  const std::string address = "127.0.0.1:" + std::to_string(port);
+  fs::create_directories(base + "/controller");
+  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--tls-dir", certs.good, "--aggregator", address, "--connect-timeout-s", "1"},
+                  base + "/controller");
+  EXPECT_EQ(ctl.WaitExit(10s), 1);
+  EXPECT_NE(ctl.stderr_text().find("no aggregator answered GetStatus"), std::string::npos) << ctl.stderr_text();
+  // The rogue aggregator's own clients (its CA) do get in.
+  v1::AggregatorStatus s;
+  EXPECT_TRUE(Status(*Client(address, certs.rogue, certs.rogue, "operator"), &s).ok());
+  EXPECT_EQ(agg.Stop(), 0);
+}
+
 // --insecure: plaintext, said loudly.
 TEST_F(TlsProcess, InsecureIsLoggedAsAWarning) {
   const std::string dir = (fs::current_path() / "tls_insecure").string();
