@@ -22,6 +22,13 @@ int main(int argc, char** argv) {
   app.add_option("--metrics", metrics, "Prometheus metrics address, HOST:PORT (port 0: pick a free one)")
       ->capture_default_str();
   app.add_option("--ports-file", ports_file, "Write the chosen ports here ('grpc P' and 'metrics P' lines)");
+  std::string tls_dir;
+  bool insecure = false;
+  auto* tls_opt = app.add_option("--tls-dir", tls_dir,
+                                 "Mutual TLS: DIR/ca.crt, DIR/aggregator.crt and DIR/aggregator.key (docs/security.md)")
+                      ->check(CLI::ExistingDirectory);
+  app.add_flag("--insecure", insecure, "Plaintext gRPC, no identities: every caller may do everything (logged)")
+      ->excludes(tls_opt);
   double silence_ms = 0, joint_age_ms = 0;
   app.add_option("--patch-silence-ms", silence_ms,
                  "Override every patch's silence deadline (default: the scene's `safety:` values); for slow links "
@@ -32,8 +39,10 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   ruffini::service::BlockStopSignals();
+  ruffini::service::CountHandshakeRefusals();
   try {
     ruffini::aggregator::ServerConfig config;
+    config.tls = ruffini::service::LoadTls(tls_dir, insecure, "aggregator");
     config.listen = ruffini::service::ParseHostPort(listen, "--listen", /*allow_zero=*/true);
     config.metrics = ruffini::service::ParseHostPort(metrics, "--metrics", /*allow_zero=*/true);
     ruffini::aggregate::Setup setup = ruffini::aggregator::SetupFromScene(scene_path);
@@ -46,7 +55,8 @@ int main(int argc, char** argv) {
       spdlog::warn("--joint-max-age-ms {}: the scene's joint-state max age is overridden", joint_age_ms);
     }
     spdlog::info("{}", ruffini::aggregator::Describe(setup));
-    spdlog::warn("plaintext gRPC (no TLS yet): every ResetStop caller is treated as an operator");
+    ruffini::service::LogTls(config.tls, "every caller is treated as every role (decoder of any patch, controller, "
+                                         "operator: any caller may ResetStop)");
     ruffini::aggregator::AggregatorServer server(config, std::move(setup));
     ruffini::service::AnnouncePorts(ports_file, {{"grpc", server.port()}, {"metrics", server.metrics_port()}});
     server.Start();

@@ -144,6 +144,9 @@ struct Stats {
   std::atomic<std::uint64_t> messages{0}, hellos_accepted{0}, hellos_refused{0}, protocol_errors{0};
   std::atomic<std::uint64_t> joint_accepted{0}, joint_rejected{0};
   std::atomic<std::uint64_t> subscriber_drops{0};
+  // Refused for who the caller is (docs/security.md): an RPC its role may not call, a hello for another
+  // patch (copied from the core), a ResetStop from a non-operator.
+  std::atomic<std::uint64_t> auth_wrong_role{0}, auth_hello_other_patch{0}, auth_reset_not_operator{0};
   std::atomic<std::uint64_t> fusion_updates{0}, fusion_inputs{0}, fusion_merges{0}, fusion_rejected{0};
   std::atomic<int> safety_subscribers{0}, contact_subscribers{0};
   std::vector<std::string> patch_ids, patch_regions;
@@ -242,6 +245,25 @@ class StatsCollectable final : public prometheus::Collectable {
         u(s_.fusion_merges));
     one("ruffini_aggregator_fusion_rejected_total", "Patch contacts the fusion refused (bad input).",
         MetricType::Counter, u(s_.fusion_rejected));
+    {
+      MetricFamily f{"ruffini_aggregator_auth_refusals_total",
+                     "Callers refused for who they are: TLS handshakes refused (no or a bad client certificate), "
+                     "an RPC the caller's role may not call, a decoder's hello for another patch, a ResetStop from a "
+                     "non-operator.",
+                     MetricType::Counter, {}};
+      const auto& h = service::handshake_refusals();
+      const std::pair<const char*, double> rows[] = {
+          {"no_certificate", u(h.no_certificate)},     {"bad_certificate", u(h.bad_certificate)},
+          {"handshake_other", u(h.other)},             {"wrong_role", u(s_.auth_wrong_role)},
+          {"hello_other_patch", u(s_.auth_hello_other_patch)}, {"reset_not_operator", u(s_.auth_reset_not_operator)}};
+      for (const auto& [reason, v] : rows) {
+        ClientMetric m;
+        m.label.push_back({"reason", reason});
+        m.counter.value = v;
+        f.metric.push_back(m);
+      }
+      out.push_back(std::move(f));
+    }
     one("ruffini_aggregator_subscriber_drops_total", "Subscribers finished because a write was stuck past its deadline.",
         MetricType::Counter, u(s_.subscriber_drops));
     {
@@ -298,6 +320,10 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
   void PublishSafety();
   void PublishContacts();
   void CopyStats();
+  // The caller's identity; true when its role is one of `allowed` (kAny, a plaintext server, always is).
+  // Otherwise counts and logs the refusal.
+  bool Allowed(const grpc::CallbackServerContext* ctx, std::string_view rpc, std::initializer_list<service::Role> allowed,
+               service::Identity* who = nullptr);
 
   // --- RPCs (callbacks only enqueue) ---
   grpc::ServerBidiReactor<v1::PatchMessage, v1::AggregatorCommand>* Connect(grpc::CallbackServerContext* ctx) override;
@@ -318,14 +344,14 @@ namespace {
 // A decoder's Connect stream.
 class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1::AggregatorCommand> {
  public:
-  ConnectReactor(AggregatorServer::Impl* impl, std::string peer)
+  ConnectReactor(AggregatorServer::Impl* impl, std::string peer, std::string allowed_patch)
       : impl_(impl), guard_(std::make_shared<Guard>()), peer_(std::move(peer)) {
     auto self = this;
     auto guard = guard_;
-    impl_->Post([self, guard, impl] {
+    impl_->Post([self, guard, impl, allowed = std::move(allowed_patch)] {
       std::lock_guard lock(guard->mu);
       if (!guard->alive) return;
-      self->stream_ = impl->core->OpenStream(impl->Now());
+      self->stream_ = impl->core->OpenStream(impl->Now(), allowed);
     });
     StartRead(&in_);
   }
@@ -471,20 +497,57 @@ class JointReactor final : public grpc::ServerReadReactor<v1::JointState> {
   v1::JointState in_;
 };
 
+// A streaming call refused at once (PERMISSION_DENIED: the caller's role may not call it).
+template <typename Base>
+class DeniedReactor final : public Base {
+ public:
+  explicit DeniedReactor(const grpc::Status& status) { this->Finish(status); }
+  void OnDone() override { delete this; }
+};
+
+grpc::Status Denied(std::string_view rpc) {
+  return grpc::Status(grpc::StatusCode::PERMISSION_DENIED,
+                      "this caller's identity (its TLS client certificate) may not call " + std::string(rpc));
+}
+
 }  // namespace
+
+bool AggregatorServer::Impl::Allowed(const grpc::CallbackServerContext* ctx, std::string_view rpc,
+                                     std::initializer_list<service::Role> allowed, service::Identity* who) {
+  service::Identity id = service::CallerIdentity(*ctx, config.tls.insecure);
+  bool ok = id.role == service::Role::kAny;
+  for (auto r : allowed) ok = ok || id.role == r;
+  if (!ok) {
+    stats.auth_wrong_role.fetch_add(1);
+    spdlog::warn("{} refused (PERMISSION_DENIED) for {} '{}' from {}", rpc, service::RoleName(id.role), id.id,
+                 ctx->peer());
+  }
+  if (who) *who = std::move(id);
+  return ok;
+}
 
 grpc::ServerBidiReactor<v1::PatchMessage, v1::AggregatorCommand>* AggregatorServer::Impl::Connect(
     grpc::CallbackServerContext* ctx) {
-  return new ConnectReactor(this, ctx->peer());
+  service::Identity who;
+  if (!Allowed(ctx, "Connect", {service::Role::kDecoder}, &who)) {
+    return new DeniedReactor<grpc::ServerBidiReactor<v1::PatchMessage, v1::AggregatorCommand>>(Denied("Connect"));
+  }
+  return new ConnectReactor(this, ctx->peer(), who.patch);
 }
 
 grpc::ServerReadReactor<v1::JointState>* AggregatorServer::Impl::PublishJointStates(
-    grpc::CallbackServerContext* /*ctx*/, v1::PublishJointStatesResponse* response) {
+    grpc::CallbackServerContext* ctx, v1::PublishJointStatesResponse* response) {
+  if (!Allowed(ctx, "PublishJointStates", {service::Role::kController})) {
+    return new DeniedReactor<grpc::ServerReadReactor<v1::JointState>>(Denied("PublishJointStates"));
+  }
   return new JointReactor(this, response);
 }
 
 grpc::ServerWriteReactor<v1::SafetyState>* AggregatorServer::Impl::WatchSafety(grpc::CallbackServerContext* ctx,
                                                                                const v1::WatchSafetyRequest* request) {
+  if (!Allowed(ctx, "WatchSafety", {service::Role::kController, service::Role::kOperator})) {
+    return new DeniedReactor<grpc::ServerWriteReactor<v1::SafetyState>>(Denied("WatchSafety"));
+  }
   auto* r = new SafetyReactor(ctx, [this](SafetyReactor* gone) {
     Post([this, gone] {
       safety_subs.erase(gone);
@@ -511,6 +574,9 @@ grpc::ServerWriteReactor<v1::SafetyState>* AggregatorServer::Impl::WatchSafety(g
 
 grpc::ServerWriteReactor<v1::ContactSet>* AggregatorServer::Impl::WatchContacts(grpc::CallbackServerContext* ctx,
                                                                                 const v1::WatchContactsRequest* /*request*/) {
+  if (!Allowed(ctx, "WatchContacts", {service::Role::kController, service::Role::kOperator})) {
+    return new DeniedReactor<grpc::ServerWriteReactor<v1::ContactSet>>(Denied("WatchContacts"));
+  }
   auto* r = new ContactsReactor(ctx, [this](ContactsReactor* gone) {
     Post([this, gone] {
       contact_subs.erase(gone);
@@ -537,9 +603,17 @@ grpc::ServerUnaryReactor* AggregatorServer::Impl::ResetStop(grpc::CallbackServer
                                                             v1::ResetStopResponse* response) {
   auto* reactor = ctx->DefaultReactor();
   const std::string peer = ctx->peer();
-  Post([this, reactor, request, response, peer] {
-    // No TLS identities yet: every caller is treated as an operator (logged).
-    *response = core->OnReset(*request, /*authorized=*/true, Now());
+  // Only an operator may reset (a plaintext server treats every caller as one, and says so at start). Anyone
+  // else gets the policy's answer for an unauthorized caller: refused, UNAUTHORIZED, nothing changed.
+  const service::Identity who = service::CallerIdentity(*ctx, config.tls.insecure);
+  const bool authorized = who.role == service::Role::kOperator || who.role == service::Role::kAny;
+  Post([this, reactor, request, response, peer, authorized, who] {
+    *response = core->OnReset(*request, authorized, Now());
+    if (!authorized) {
+      stats.auth_reset_not_operator.fetch_add(1);
+      spdlog::warn("ResetStop refused (UNAUTHORIZED) for {} '{}' from {}: only an operator may reset",
+                   service::RoleName(who.role), who.id, peer);
+    }
     if (response->accepted()) {
       stats.resets_accepted.fetch_add(1);
       spdlog::warn("ResetStop accepted from {} ({}): epoch {}", peer, request->operator_name(), request->stop_epoch());
@@ -556,6 +630,10 @@ grpc::ServerUnaryReactor* AggregatorServer::Impl::GetStatus(grpc::CallbackServer
                                                             const v1::GetStatusRequest* /*request*/,
                                                             v1::AggregatorStatus* response) {
   auto* reactor = ctx->DefaultReactor();
+  if (!Allowed(ctx, "GetStatus", {service::Role::kController, service::Role::kOperator})) {
+    reactor->Finish(Denied("GetStatus"));
+    return reactor;
+  }
   Post([this, reactor, response] {
     *response = core->Status(Now());
     response->set_safety_subscribers(static_cast<std::uint32_t>(safety_subs.size()));
@@ -592,6 +670,7 @@ void AggregatorServer::Impl::CopyStats() {
   for (auto v : c.hellos_refused) refused += v;
   stats.hellos_refused = refused;
   stats.protocol_errors = c.protocol_errors;
+  stats.auth_hello_other_patch = c.hellos_refused[v1::HELLO_REFUSAL_UNAUTHORIZED];
   stats.joint_accepted = c.joint_states[0];
   std::uint64_t rejected = 0;
   for (std::size_t i = 1; i < c.joint_states.size(); ++i) rejected += c.joint_states[i];
@@ -683,7 +762,7 @@ AggregatorServer::AggregatorServer(ServerConfig config, aggregate::Setup setup) 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(config.listen.str(), grpc::InsecureServerCredentials(), &s.port);
+  builder.AddListeningPort(config.listen.str(), service::ServerCredentials(config.tls), &s.port);
   builder.RegisterService(&s);
   s.server = builder.BuildAndStart();
   if (!s.server || s.port == 0) throw InputError("--listen " + config.listen.str() + ": cannot listen there");

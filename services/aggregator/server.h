@@ -10,12 +10,14 @@
 
 #include "ruffini/aggregate/core.h"
 #include "ruffini/service/common.h"
+#include "ruffini/service/tls.h"
 
 namespace ruffini::aggregator {
 
 struct ServerConfig {
   service::HostPort listen;             // port 0: pick a free one
   service::HostPort metrics;            // port 0: pick a free one
+  service::TlsConfig tls;               // insecure: plaintext, every caller has every role
   std::int64_t heartbeat_period_ns = 10'000'000;   // SafetyState heartbeat to every subscriber
   std::int64_t write_deadline_ns = 50'000'000;     // a subscriber's write stuck longer is finished with an error
   std::int64_t contacts_period_ns = 20'000'000;    // ContactSet heartbeat

@@ -22,6 +22,7 @@
 
 #include "ruffini/error.h"
 #include "ruffini/service/common.h"
+#include "ruffini/service/tls.h"
 #include "safety_client.h"
 
 namespace {
@@ -67,6 +68,12 @@ int main(int argc, char** argv) {
   app.add_option("--connect-timeout-s", connect_timeout_s, "How long to wait for the aggregator's GetStatus at start, s")
       ->capture_default_str()->check(CLI::Range(0.1, 600.0));
   app.add_option("--subscriber", subscriber, "The name this controller gives the aggregator")->capture_default_str();
+  std::string tls_dir;
+  bool insecure = false;
+  auto* tls_opt = app.add_option("--tls-dir", tls_dir,
+                                 "Mutual TLS: DIR/ca.crt, DIR/controller.crt and DIR/controller.key (docs/security.md)")
+                      ->check(CLI::ExistingDirectory);
+  app.add_flag("--insecure", insecure, "Plaintext gRPC to the aggregator (logged as a warning)")->excludes(tls_opt);
   CLI11_PARSE(app, argc, argv);
 
   sigset_t stop_signals;
@@ -78,7 +85,9 @@ int main(int argc, char** argv) {
 
   try {
     const auto address = ruffini::service::ParseHostPort(aggregator, "--aggregator");
-    auto channel = rc::MakeAggregatorChannel(address.str());
+    const auto tls = ruffini::service::LoadTls(tls_dir, insecure, "controller");
+    ruffini::service::LogTls(tls, "the aggregator cannot tell this controller from anyone else");
+    auto channel = rc::MakeAggregatorChannel(address.str(), ruffini::service::ChannelCredentials(tls));
 
     // The joint names, in the order the aggregator's robot model lists them.
     v1::AggregatorStatus status;

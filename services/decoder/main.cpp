@@ -11,6 +11,7 @@
 #include <string>
 
 #include "ruffini/error.h"
+#include "ruffini/service/tls.h"
 #include "service.h"
 
 int main(int argc, char** argv) {
@@ -39,9 +40,14 @@ int main(int argc, char** argv) {
   app.add_option("--reject-fault-frames", config.reject_fault_frames,
                  "Frames rejected in a row before a fault (default: 20 ms of frames, at least 3)");
   app.add_option("--ports-file", ports_file, "Write the chosen metrics port here ('metrics P')");
+  auto* tls_opt = app.add_option("--tls-dir", config.tls_dir,
+                                 "Mutual TLS: DIR/ca.crt, DIR/decoder-PATCH.crt and DIR/decoder-PATCH.key (docs/security.md)")
+                      ->check(CLI::ExistingDirectory);
+  app.add_flag("--insecure", config.insecure, "Plaintext gRPC to the aggregator (logged as a warning)")->excludes(tls_opt);
   CLI11_PARSE(app, argc, argv);
 
   ruffini::service::BlockStopSignals();  // in every thread; main waits for them
+  ruffini::service::CountHandshakeRefusals();
 
   try {
     config.interrogator = ruffini::service::ParseHostPort(interrogator, "--interrogator");
@@ -49,7 +55,6 @@ int main(int argc, char** argv) {
     config.metrics = ruffini::service::ParseHostPort(metrics, "--metrics", /*allow_zero=*/true);
     ruffini::decoder::DecoderService service(config);
     spdlog::info("{}", service.Describe());
-    spdlog::warn("the aggregator link is plaintext (no TLS yet)");
     ruffini::service::AnnouncePorts(ports_file, {{"metrics", service.metrics_port()}});
     service.Start();
     const int sig = ruffini::service::WaitForStopSignal();

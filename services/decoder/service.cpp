@@ -18,6 +18,7 @@
 #include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
 #include "ruffini/service/process_metrics.h"
+#include "ruffini/service/tls.h"
 #include "ruffini/ingest/hyperion.h"
 #include "ruffini/link/to_proto.h"
 #include "ruffini/twin/scene.h"
@@ -248,6 +249,7 @@ class RingSink final : public link::MessageSink {
 // ---------------------------------------------------------------------------------------------------------
 struct DecoderService::Impl {
   ServiceConfig config;
+  service::TlsConfig tls;
   twin::Scene scene;
   const twin::ScenePatch* patch = nullptr;
   std::size_t channel = 0;
@@ -483,6 +485,8 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
   s.scene = twin::LoadScene(s.config.scene_path);
   s.patch = &s.scene.Patch(s.config.patch);
   s.patch_id = s.patch->name;
+  s.tls = service::LoadTls(s.config.tls_dir, s.config.insecure, "decoder-" + s.patch_id);
+  service::LogTls(s.tls, "the aggregator cannot tell who publishes this patch");
   const auto index = static_cast<std::size_t>(s.patch - s.scene.patches.data());
   if (s.config.channel >= static_cast<int>(ingest::kChannels)) {
     throw InputError("--channel " + std::to_string(s.config.channel) + ": expected 0 to 15");
@@ -579,7 +583,7 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
   s.channel_to_aggregator =
-      grpc::CreateCustomChannel(s.config.aggregator.str(), grpc::InsecureChannelCredentials(), args);
+      grpc::CreateCustomChannel(s.config.aggregator.str(), service::ChannelCredentials(s.tls), args);
 }
 
 DecoderService::~DecoderService() { Stop(); }

@@ -36,6 +36,10 @@ struct ServiceConfig {
   double silence_ms = 0.0;           // 0: 3 frame periods
   int reject_fault_frames = 0;       // 0: 20 ms of frames (at least 3)
   bool allow_missing = true;         // a dark grating (15 peaks) is a missing peak, not a rejected frame
+  // The aggregator link: exactly one of tls_dir (mutual TLS with DIR/ca.crt, DIR/decoder-PATCH.crt and .key,
+  // docs/security.md) and insecure (plaintext).
+  std::string tls_dir;
+  bool insecure = false;
 };
 
 class DecoderService {

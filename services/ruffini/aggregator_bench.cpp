@@ -492,7 +492,7 @@ LatencyRun RunLatency(const AggregatorBenchOptions& o, int patches, const std::f
 
   int grpc_port = 0, sim_port = 0;
   const auto t_start = Clock::now();
-  auto agg = StartWithPorts({Exe(o, "ruffini-aggregator"), "--scene", run.scene, "--listen", "127.0.0.1:0",
+  auto agg = StartWithPorts({Exe(o, "ruffini-aggregator"), "--insecure", "--scene", run.scene, "--listen", "127.0.0.1:0",
                              "--metrics", "127.0.0.1:0"},
                             dir + "/aggregator", "grpc", grpc_port);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
@@ -509,7 +509,7 @@ LatencyRun RunLatency(const AggregatorBenchOptions& o, int patches, const std::f
     int metrics = 0;
     // --silence-ms 100: the decoder's interrogator watchdog, widened for a loaded 2-core machine; the
     // aggregator keeps the scene's own deadlines.
-    decoders.push_back(StartWithPorts({Exe(o, "ruffini-decoder"), "--scene", run.scene, "--patch", p, "--interrogator",
+    decoders.push_back(StartWithPorts({Exe(o, "ruffini-decoder"), "--insecure", "--scene", run.scene, "--patch", p, "--interrogator",
                                        "127.0.0.1:" + std::to_string(sim_port), "--aggregator", address, "--metrics",
                                        "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100"},
                                       dir + "/decoder_" + p, "metrics", metrics));
@@ -608,7 +608,7 @@ FanInRun RunFanIn(const AggregatorBenchOptions& o, int patches, const std::funct
   const std::string tag = "fan-in " + std::to_string(patches) + " patches: ";
 
   int grpc_port = 0;
-  auto agg = StartWithPorts({Exe(o, "ruffini-aggregator"), "--scene", scene, "--listen", "127.0.0.1:0", "--metrics",
+  auto agg = StartWithPorts({Exe(o, "ruffini-aggregator"), "--insecure", "--scene", scene, "--listen", "127.0.0.1:0", "--metrics",
                              "127.0.0.1:0"},
                             dir + "/aggregator", "grpc", grpc_port);
   const int metrics_port = ReadPorts(dir + "/aggregator/ports")["metrics"];

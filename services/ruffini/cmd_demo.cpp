@@ -26,6 +26,10 @@ void RegisterDemoCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--out", o->out_dir, "Report folder (report.md, SVG figures, logs/)")->capture_default_str();
   cmd->add_option("--rate-hz", o->rate_hz, "Interrogator rate")->check(CLI::Range(100.0, 5000.0))->capture_default_str();
+  cmd->add_option("--tls-dir", o->tls_dir,
+                  "Mutual TLS for every process (deploy/tls/make-dev-ca.sh DIR --scene SCENE; the demo is the "
+                  "operator); default: every process --insecure on loopback")
+      ->check(CLI::ExistingDirectory);
   cmd->callback([o]() {
     std::error_code ec;
     const auto self = std::filesystem::read_symlink("/proc/self/exe", ec);

@@ -27,6 +27,7 @@
 #include "ruffini/scene_file.h"
 #include "ruffini/service/child.h"
 #include "ruffini/service/common.h"
+#include "ruffini/service/tls.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 
 namespace ruffini::cli {
@@ -60,12 +61,12 @@ struct SetRecord {
 // The demo's own subscriber: WatchSafety and WatchContacts, recorded with arrival times.
 class Observer {
  public:
-  explicit Observer(const std::string& address) {
+  Observer(const std::string& address, const std::shared_ptr<grpc::ChannelCredentials>& credentials) {
     grpc::ChannelArguments args;
     args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
     args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
     args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
-    channel_ = grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+    channel_ = grpc::CreateCustomChannel(address, credentials, args);
     stub_ = v1::Aggregator::NewStub(channel_);
     safety_ = std::thread([this] {
       v1::WatchSafetyRequest req;
@@ -212,22 +213,27 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   const std::string killed_patch = patches.back();
   const fs::path out = o.out_dir;
   const fs::path run = out / "logs";
-  fs::remove_all(run);  // an earlier run's ports files would point at ports nobody listens on now
+  // A fresh logs folder: a ports file left by an earlier run in the same --out would be read as this run's.
+  fs::remove_all(run);
   fs::create_directories(run);
   auto exe = [&](const char* name) { return (fs::path(o.bin_dir) / name).string(); };
   const std::string rate = std::to_string(static_cast<int>(o.rate_hz));
+  // Mutual TLS with the demo as the operator, or plaintext on loopback (each process logs which).
+  const std::string tls_dir = o.tls_dir.empty() ? std::string{} : fs::absolute(o.tls_dir).string();
+  const service::TlsConfig tls = service::LoadTls(tls_dir, tls_dir.empty(), "operator");
+  const std::string transport = tls_dir.empty() ? "--insecure" : "--tls-dir=" + tls_dir;
 
   // --- Start-up ---------------------------------------------------------------------------------------
   log("starting ruffini-aggregator (" + o.scene_path + ")");
-  Child aggregator({exe("ruffini-aggregator"), "--scene", o.scene_path, "--listen", "127.0.0.1:0", "--metrics",
+  Child aggregator({exe("ruffini-aggregator"), transport, "--scene", o.scene_path, "--listen", "127.0.0.1:0", "--metrics",
                     "127.0.0.1:0", "--ports-file", (run / "aggregator" / "ports").string()},
                    (run / "aggregator").string());
   const int grpc_port = aggregator.WaitPort((run / "aggregator" / "ports").string(), "grpc", 15s);
   if (grpc_port == 0) throw InputError("ruffini-aggregator did not start: " + aggregator.stderr_text());
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
-  Observer observer(address);
+  Observer observer(address, service::ChannelCredentials(tls));
   log("aggregator on " + address + "; starting ruffini-controller (joint states at " + rate + " Hz)");
-  Child controller({exe("ruffini-controller"), "--aggregator", address, "--rate-hz", rate},
+  Child controller({exe("ruffini-controller"), transport, "--aggregator", address, "--rate-hz", rate},
                    (run / "controller").string());
   log("starting ruffini-sim (" + o.scenario_path + ", " + rate + " Hz)");
   Child sim({exe("ruffini-sim"), "--scene", o.scene_path, "--scenario", o.scenario_path, "--rate-hz", rate,
@@ -239,7 +245,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   std::map<std::string, std::unique_ptr<Child>> decoders;
   auto start_decoder = [&](const std::string& patch) {
     decoders[patch] = std::make_unique<Child>(
-        std::vector<std::string>{exe("ruffini-decoder"), "--scene", o.scene_path, "--patch", patch, "--interrogator",
+        std::vector<std::string>{exe("ruffini-decoder"), transport, "--scene", o.scene_path, "--patch", patch, "--interrogator",
                                  "127.0.0.1:" + std::to_string(stream_port), "--aggregator", address, "--metrics",
                                  "127.0.0.1:0", "--rate-hz", rate},
         (run / ("decoder-" + patch)).string());
@@ -592,7 +598,10 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   md << "# `ruffini demo`\n\n"
      << "Written by `ruffini demo` (" << o.scene_path << ", " << o.scenario_path << ", " << rate << " Hz): "
      << "ruffini-sim, one ruffini-decoder per patch, ruffini-aggregator and ruffini-controller as separate processes "
-        "on 127.0.0.1. Logs of every process are in `logs/`. The timeline is in docs/demo.md.\n\n"
+        "on 127.0.0.1, "
+     << (tls_dir.empty() ? std::string("in plaintext (`--insecure`)")
+                         : "over mutual TLS (`--tls-dir " + tls_dir + "`, the demo as the operator)")
+     << ". Logs of every process are in `logs/`. The timeline is in docs/demo.md.\n\n"
      << "**" << passed << " of " << events.size() << " scripted events got their expected safety response.**\n\n"
      << "| t (s) | event | expected | observed | |\n| --- | --- | --- | --- | --- |\n";
   for (const auto& e : events) {

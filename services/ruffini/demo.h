@@ -15,6 +15,9 @@ struct DemoOptions {
   std::string out_dir = "demo-report";
   std::string bin_dir;         // where ruffini-sim, -decoder, -aggregator, -controller are
   double rate_hz = 1000.0;
+  // Mutual TLS (docs/security.md): every process gets --tls-dir DIR, the demo itself is the operator
+  // (DIR/operator.crt). Empty: every process runs --insecure on loopback.
+  std::string tls_dir;
 };
 
 struct DemoResult {

@@ -236,7 +236,7 @@ EndToEndRun RunEndToEnd(const ServiceBenchOptions& o, double rate_hz, const std:
       std::to_string(stream_port));
 
   const auto decoder_start = Clock::now();
-  Child decoder({decoder_exe, "--scene", o.scene_path, "--patch", o.patch, "--interrogator",
+  Child decoder({decoder_exe, "--insecure", "--scene", o.scene_path, "--patch", o.patch, "--interrogator",
                  "127.0.0.1:" + std::to_string(stream_port), "--aggregator", aggregator.address(), "--metrics",
                  "127.0.0.1:0", "--ports-file", decoder_ports, "--rate-hz", Rate(rate_hz)},
                 dir + "/decoder");

@@ -156,7 +156,7 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   int grpc_port = 0, sim_port = 0;
   // Deadlines widened (200 ms silence, 200 ms joint-state age) so that a loaded 2-core CI machine does not
   // fault a healthy patch; the 30 ms deadlines of the scene are tested on an injected clock (safety tests).
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
                                     "127.0.0.1:0", "--patch-silence-ms", "200", "--joint-max-age-ms", "200"},
                                    base + "/aggregator", "grpc", grpc_port);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
@@ -180,7 +180,7 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   std::vector<rt::Process> decoders;
   for (const auto& p : kPatches) {
     int metrics = 0;
-    decoders.push_back(StartWithPorts({RUFFINI_DECODER_EXE, "--scene", kScene, "--patch", p, "--interrogator",
+    decoders.push_back(StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", p, "--interrogator",
                                        "127.0.0.1:" + std::to_string(sim_port), "--aggregator", address, "--metrics",
                                        "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100"},
                                       base + "/decoder_" + p, "metrics", metrics));
@@ -296,7 +296,7 @@ TEST(AggregatorProcess, MetricsPassPromtool) {
   if (std::system("command -v promtool >/dev/null 2>&1") != 0) GTEST_SKIP() << "promtool not installed";
   const std::string dir = (fs::current_path() / "aggregator_metrics").string();
   int grpc_port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
                                     "127.0.0.1:0"},
                                    dir, "grpc", grpc_port);
   Controller watcher("127.0.0.1:" + std::to_string(grpc_port));
@@ -311,7 +311,7 @@ TEST(AggregatorProcess, MetricsPassPromtool) {
 TEST(AggregatorProcess, ASubscriberThatStopsReadingIsDroppedNotWaitedFor) {
   const std::string dir = (fs::current_path() / "aggregator_stuck").string();
   int grpc_port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
                                     "127.0.0.1:0"},
                                    dir, "grpc", grpc_port);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
@@ -349,7 +349,7 @@ TEST(AggregatorProcess, ASubscriberThatStopsReadingIsDroppedNotWaitedFor) {
 TEST(AggregatorProcess, ASceneWithoutSafetyIsAClearError) {
   const std::string dir = (fs::current_path() / "aggregator_nosafety").string();
   fs::create_directories(dir);
-  rt::Process p({RUFFINI_AGGREGATOR_EXE, "--scene", kSrc + "/config/scenes/forearm.yaml", "--listen", "127.0.0.1:0",
+  rt::Process p({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kSrc + "/config/scenes/forearm.yaml", "--listen", "127.0.0.1:0",
                  "--metrics", "127.0.0.1:0"},
                 dir);
   EXPECT_EQ(p.WaitExit(10s), 1);

@@ -128,6 +128,32 @@ TEST_F(CoreTest, StartsInFaultAndHellosAreChecked) {
   (void)first;
 }
 
+// A stream opened for a caller whose certificate names forearm_a (docs/security.md): a hello for forearm_b is
+// refused UNAUTHORIZED, counted, and changes nothing: not forearm_b's live link, not the safety state.
+TEST_F(CoreTest, AHelloForAnotherPatchThanTheCallersIsUnauthorizedAndChangesNothing) {
+  const int live = Connect(1, kT0);  // forearm_b, held by its own decoder
+  const v1::SafetyState before = core.SafetyState();
+  const auto status_before = core.Status(kT0 + kMs);
+  const int impostor = core.OpenStream(kT0 + kMs, setup.patches[0].id);
+  const auto r = core.OnPatchMessage(impostor, Hello(setup, 1), kT0 + kMs);
+  ASSERT_TRUE(r.command && r.command->has_hello_refused());
+  EXPECT_EQ(r.command->hello_refused().reason(), v1::HELLO_REFUSAL_UNAUTHORIZED);
+  EXPECT_NE(r.command->hello_refused().message().find("forearm_a"), std::string::npos);
+  EXPECT_TRUE(r.close);
+  EXPECT_EQ(core.counters().hellos_refused[v1::HELLO_REFUSAL_UNAUTHORIZED], 1u);
+  core.CloseStream(impostor, kT0 + kMs);
+  EXPECT_EQ(core.SafetyState().state(), before.state());
+  EXPECT_EQ(core.SafetyState().stop_epoch(), before.stop_epoch());
+  const auto status_after = core.Status(kT0 + kMs);
+  EXPECT_EQ(status_after.patches(1).link_state(), status_before.patches(1).link_state());
+  EXPECT_EQ(status_after.patches(0).link_state(), status_before.patches(0).link_state());
+  // The same caller publishing its own patch is accepted.
+  const int own = core.OpenStream(kT0 + 2 * kMs, setup.patches[0].id);
+  const auto ok = core.OnPatchMessage(own, Hello(setup, 0), kT0 + 2 * kMs);
+  ASSERT_TRUE(ok.command && ok.command->has_hello_accepted()) << ok.command->DebugString();
+  (void)live;
+}
+
 TEST_F(CoreTest, ASeqBreakEndsTheStreamAndFaults) {
   std::vector<int> streams;
   for (std::size_t i = 0; i < setup.patches.size(); ++i) streams.push_back(Connect(i, kT0));

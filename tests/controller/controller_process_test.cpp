@@ -41,7 +41,7 @@ std::map<std::string, int> ReadPorts(const std::string& path) {
 rt::Process StartAggregator(const std::string& dir, const std::string& listen, int& port) {
   fs::remove_all(dir);
   fs::create_directories(dir);
-  rt::Process p({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", listen, "--metrics", "127.0.0.1:0",
+  rt::Process p({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", listen, "--metrics", "127.0.0.1:0",
                  "--ports-file", dir + "/ports"},
                 dir);
   EXPECT_TRUE(rt::WaitFor([&] { return ReadPorts(dir + "/ports").count("grpc") > 0 || !p.Running(); }, 15s));
@@ -223,7 +223,7 @@ TEST(ControllerProcess, RuffiniControllerPublishesJointStatesTheAggregatorAccept
   const std::string base = Base("run");
   rt::Process agg = StartAggregator(base + "/aggregator", "127.0.0.1:0", port);
   const std::string address = "127.0.0.1:" + std::to_string(port);
-  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--aggregator", address, "--rate-hz", "1000", "--duration-s", "2"},
+  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--aggregator", address, "--rate-hz", "1000", "--duration-s", "2"},
                   base + "/controller");
   auto channel = rc::MakeAggregatorChannel(address);
   auto stub = v1::Aggregator::NewStub(channel);
@@ -262,7 +262,7 @@ TEST(ControllerProcess, RuffiniControllerStopsOnSigtermWithExitZero) {
   int port = 0;
   const std::string base = Base("sigterm");
   rt::Process agg = StartAggregator(base + "/aggregator", "127.0.0.1:0", port);
-  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--aggregator", "127.0.0.1:" + std::to_string(port)}, base + "/controller");
+  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--aggregator", "127.0.0.1:" + std::to_string(port)}, base + "/controller");
   ASSERT_TRUE(rt::WaitFor([&] { return ctl.stdout_text().find("HALT FAULT") != std::string::npos || !ctl.Running(); },
                           5s)) << ctl.stderr_text();
   EXPECT_EQ(ctl.Stop(), 0) << ctl.stderr_text();
@@ -274,13 +274,13 @@ TEST(ControllerProcess, RuffiniControllerStopsOnSigtermWithExitZero) {
 TEST(ControllerProcess, ABadAddressIsAClearError) {
   const std::string base = Base("badaddress");
   {
-    rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--aggregator", "localhost"}, base + "/noport");
+    rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--aggregator", "localhost"}, base + "/noport");
     EXPECT_EQ(ctl.WaitExit(10s), 1);
     EXPECT_NE(ctl.stderr_text().find("--aggregator"), std::string::npos) << ctl.stderr_text();
   }
   {
     // Nothing listens on port 1.
-    rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--aggregator", "127.0.0.1:1", "--connect-timeout-s", "0.5"},
+    rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--aggregator", "127.0.0.1:1", "--connect-timeout-s", "0.5"},
                     base + "/nobody");
     EXPECT_EQ(ctl.WaitExit(10s), 1);
     EXPECT_NE(ctl.stderr_text().find("--aggregator 127.0.0.1:1: no aggregator answered GetStatus within"),

@@ -74,7 +74,7 @@ struct Decoder {
     fs::remove_all(dir);
     fs::create_directories(dir);
     const std::string ports = dir + "/ports";
-    std::vector<std::string> args = {RUFFINI_DECODER_EXE, "--scene", kScene, "--patch", "forearm",
+    std::vector<std::string> args = {RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", "forearm",
                                      "--interrogator", "127.0.0.1:" + std::to_string(stream_port), "--aggregator",
                                      aggregator, "--metrics", "127.0.0.1:0", "--ports-file", ports, "--rate-hz", "1000"};
     args.insert(args.end(), extra.begin(), extra.end());

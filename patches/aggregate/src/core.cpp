@@ -83,9 +83,10 @@ void Core::Note(const safety::Step& step) {
   }
 }
 
-int Core::OpenStream(std::int64_t /*now_ns*/) {
+int Core::OpenStream(std::int64_t /*now_ns*/, std::string allowed_patch) {
   const int id = next_stream_++;
   streams_[id] = Stream{};
+  streams_[id].allowed_patch = std::move(allowed_patch);
   return id;
 }
 
@@ -119,6 +120,14 @@ Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int
     // The first message: a hello, seq 1, the envelope's id = the scene's patch.
     if (!m.has_hello() || m.seq() != 1) {
       return Refuse(s, v1::HELLO_REFUSAL_PROTOCOL_ERROR, "the first message must be a PatchHello with seq 1", now_ns);
+    }
+    if (!s.allowed_patch.empty() && m.patch_id() != s.allowed_patch) {
+      // Not this caller's patch: refused before anything is looked up, so the patch it names (perhaps live
+      // and healthy on another stream) and the safety state are left alone.
+      return Refuse(s, v1::HELLO_REFUSAL_UNAUTHORIZED,
+                    "this decoder's identity may publish only patch '" + s.allowed_patch + "', not '" + m.patch_id() +
+                        "'",
+                    now_ns);
     }
     const std::int32_t patch = policy_.FindPatch(m.patch_id());
     if (patch == safety::kNoPatch) {

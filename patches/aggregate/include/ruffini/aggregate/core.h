@@ -73,8 +73,10 @@ class Core {
   Core(Setup setup, std::int64_t now_ns);
 
   // --- Connect streams ---
-  // A new stream; returns its id.
-  int OpenStream(std::int64_t now_ns);
+  // A new stream; returns its id. allowed_patch: the only patch id its caller may publish (its certificate's
+  // identity); empty: any (a plaintext service). A hello for another patch is refused UNAUTHORIZED and
+  // leaves every patch's state, and the safety state, as they were.
+  int OpenStream(std::int64_t now_ns, std::string allowed_patch = {});
   struct Reply {
     std::optional<v1::AggregatorCommand> command;  // to send on the stream
     bool close = false;                            // end the stream (after the command, if any)
@@ -121,6 +123,7 @@ class Core {
  private:
   struct Stream {
     int patch = -1;        // after an accepted hello
+    std::string allowed_patch;  // empty: any
     std::uint64_t seq = 0;
     bool hello_done = false;
   };
