@@ -275,10 +275,13 @@ if (args.compose) {
     for (let i = 1; i < cmd.length; i++) {
       const a = String(cmd[i]);
       if (!a.startsWith("--")) continue;
-      if (a === "--insecure") fail(id, "--insecure");
+      // The compose demo is a one-host development topology: plaintext is allowed there (and the services log it);
+      // the Kubernetes manifests above may never carry --insecure.
       if (!flagIn(text, a)) fail(id, `${exe} does not accept ${a} (not in its --help)`);
       if (a === "--metrics") metrics = String(cmd[i + 1]).split(":").pop();
     }
+    if (exe !== "ruffini-sim" && !cmd.map(String).some((a) => a === "--insecure" || a === "--tls-dir"))
+      fail(id, `${exe} needs --tls-dir DIR or --insecure (it refuses to start without one)`);
     if (metrics) metricsPorts.push(`${name}:${metrics}`);
     const hc = svc.healthcheck && svc.healthcheck.test;
     if (exe === "ruffini-decoder" && !(hc && hc.includes("/usr/local/bin/ruffini-ready") && hc.includes(metrics)))

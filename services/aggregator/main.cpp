@@ -19,6 +19,10 @@ int main(int argc, char** argv) {
   app.add_option("--scene", scene_path, "Scene YAML (robot, patches and mounts, safety regions)")
       ->required()->check(CLI::ExistingFile);
   app.add_option("--listen", listen, "gRPC address, HOST:PORT (port 0: pick a free one)")->capture_default_str();
+  std::string health_listen;
+  app.add_option("--health-listen", health_listen,
+                 "Also serve grpc.health.v1 (only) in plaintext here, HOST:PORT, for probes that cannot present a "
+                 "client certificate (Kubernetes' gRPC probe)");
   app.add_option("--metrics", metrics, "Prometheus metrics address, HOST:PORT (port 0: pick a free one)")
       ->capture_default_str();
   app.add_option("--ports-file", ports_file, "Write the chosen ports here ('grpc P' and 'metrics P' lines)");
@@ -45,6 +49,9 @@ int main(int argc, char** argv) {
     config.tls = ruffini::service::LoadTls(tls_dir, insecure, "aggregator");
     config.listen = ruffini::service::ParseHostPort(listen, "--listen", /*allow_zero=*/true);
     config.metrics = ruffini::service::ParseHostPort(metrics, "--metrics", /*allow_zero=*/true);
+    if (!health_listen.empty()) {
+      config.health_listen = ruffini::service::ParseHostPort(health_listen, "--health-listen", /*allow_zero=*/true);
+    }
     ruffini::aggregate::Setup setup = ruffini::aggregator::SetupFromScene(scene_path);
     if (silence_ms > 0) {
       for (auto& p : setup.safety.patches) p.silence_deadline_ns = static_cast<std::int64_t>(silence_ms * 1e6);
@@ -58,7 +65,9 @@ int main(int argc, char** argv) {
     ruffini::service::LogTls(config.tls, "every caller is treated as every role (decoder of any patch, controller, "
                                          "operator: any caller may ResetStop)");
     ruffini::aggregator::AggregatorServer server(config, std::move(setup));
-    ruffini::service::AnnouncePorts(ports_file, {{"grpc", server.port()}, {"metrics", server.metrics_port()}});
+    std::vector<std::pair<std::string, int>> ports = {{"grpc", server.port()}, {"metrics", server.metrics_port()}};
+    if (server.health_port() != 0) ports.emplace_back("health", server.health_port());
+    ruffini::service::AnnouncePorts(ports_file, ports);
     server.Start();
     const int sig = ruffini::service::WaitForStopSignal();
     spdlog::info("signal {}: sending FAULT to every subscriber and stopping", sig);

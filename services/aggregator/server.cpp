@@ -288,6 +288,8 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
   ServerConfig config;
   std::unique_ptr<aggregate::Core> core;  // owned by the loop thread after Start()
   std::unique_ptr<grpc::Server> server;
+  std::unique_ptr<grpc::Server> health_server;  // plaintext, grpc.health.v1 only
+  int health_port = 0;
   int port = 0;
   std::unique_ptr<prometheus::Exposer> exposer;
   std::shared_ptr<StatsCollectable> collectable;
@@ -766,6 +768,15 @@ AggregatorServer::AggregatorServer(ServerConfig config, aggregate::Setup setup) 
   builder.RegisterService(&s);
   s.server = builder.BuildAndStart();
   if (!s.server || s.port == 0) throw InputError("--listen " + config.listen.str() + ": cannot listen there");
+  if (config.health_listen) {
+    // No service registered: the server carries only gRPC's default health service (enabled above).
+    grpc::ServerBuilder health;
+    health.AddListeningPort(config.health_listen->str(), grpc::InsecureServerCredentials(), &s.health_port);
+    s.health_server = health.BuildAndStart();
+    if (!s.health_server || s.health_port == 0) {
+      throw InputError("--health-listen " + config.health_listen->str() + ": cannot listen there");
+    }
+  }
   try {
     s.exposer = std::make_unique<prometheus::Exposer>(config.metrics.str());
   } catch (const std::exception& e) {
@@ -780,6 +791,8 @@ AggregatorServer::~AggregatorServer() { Stop(); }
 
 std::uint16_t AggregatorServer::port() const noexcept { return static_cast<std::uint16_t>(impl_->port); }
 
+std::uint16_t AggregatorServer::health_port() const noexcept { return static_cast<std::uint16_t>(impl_->health_port); }
+
 std::uint16_t AggregatorServer::metrics_port() const noexcept {
   const auto ports = impl_->exposer->GetListeningPorts();
   return ports.empty() ? 0 : static_cast<std::uint16_t>(ports.front());
@@ -788,6 +801,7 @@ std::uint16_t AggregatorServer::metrics_port() const noexcept {
 void AggregatorServer::Start() {
   Impl& s = *impl_;
   s.server->GetHealthCheckService()->SetServingStatus(true);
+  if (s.health_server) s.health_server->GetHealthCheckService()->SetServingStatus(true);
   s.loop = std::thread([&s] { s.Loop(); });
 }
 
@@ -795,6 +809,7 @@ void AggregatorServer::Stop() {
   Impl& s = *impl_;
   if (!s.loop.joinable()) return;
   s.server->GetHealthCheckService()->SetServingStatus(false);
+  if (s.health_server) s.health_server->GetHealthCheckService()->SetServingStatus(false);
   // Last words: FAULT (shutting down) to every subscriber, then every stream finished.
   std::promise<void> finished;
   s.Post([&s, &finished] {
@@ -814,6 +829,10 @@ void AggregatorServer::Stop() {
   s.cv.notify_one();
   s.loop.join();
   s.server->Wait();
+  if (s.health_server) {
+    s.health_server->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(100));
+    s.health_server->Wait();
+  }
 }
 
 }  // namespace ruffini::aggregator

@@ -6,6 +6,7 @@
 // past its deadline is finished with an error, so its controller stops (silence is a stop).
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "ruffini/aggregate/core.h"
@@ -18,6 +19,9 @@ struct ServerConfig {
   service::HostPort listen;             // port 0: pick a free one
   service::HostPort metrics;            // port 0: pick a free one
   service::TlsConfig tls;               // insecure: plaintext, every caller has every role
+  // A plaintext listener serving only grpc.health.v1 (the kubelet's gRPC probe cannot present a client
+  // certificate); none when unset.
+  std::optional<service::HostPort> health_listen;
   std::int64_t heartbeat_period_ns = 10'000'000;   // SafetyState heartbeat to every subscriber
   std::int64_t write_deadline_ns = 50'000'000;     // a subscriber's write stuck longer is finished with an error
   std::int64_t contacts_period_ns = 20'000'000;    // ContactSet heartbeat
@@ -33,6 +37,7 @@ class AggregatorServer {
 
   [[nodiscard]] std::uint16_t port() const noexcept;
   [[nodiscard]] std::uint16_t metrics_port() const noexcept;
+  [[nodiscard]] std::uint16_t health_port() const noexcept;  // 0 without --health-listen
   void Start();
   // Publishes FAULT (shutting down) to every subscriber, finishes every stream, stops the server within
   // about a second.

@@ -2,12 +2,14 @@
 // scripted scenario, one ruffini-decoder per patch, ruffini-aggregator; this test is the controller (a
 // WatchSafety subscriber and a 100 Hz joint-state publisher over gRPC). Every wait is a condition with a
 // deadline; every process is stopped by pid.
+#include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
 #include <atomic>
 #include <chrono>
 #include <fstream>
+#include <future>
 #include <map>
 #include <optional>
 #include <mutex>
@@ -344,6 +346,44 @@ TEST(AggregatorProcess, ASubscriberThatStopsReadingIsDroppedNotWaitedFor) {
   while (reader->Read(&s)) {
   }
   EXPECT_FALSE(reader->Finish().ok());
+}
+
+// grpc.health.v1.Health/Check with an empty request; the reply's status (1 = SERVING), or -1 on an error.
+int HealthCheck(const std::string& address) {
+  grpc::GenericStub stub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + 3s);
+  grpc::Slice empty("");  // HealthCheckRequest{service: ""} serialises to no bytes
+  grpc::ByteBuffer request(&empty, 1), response;
+  std::promise<grpc::Status> done;
+  stub.UnaryCall(&ctx, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request, &response,
+                 [&](grpc::Status st) { done.set_value(st); });
+  if (!done.get_future().get().ok()) return -1;
+  std::vector<grpc::Slice> slices;
+  response.Dump(&slices);
+  std::string bytes;
+  for (const auto& sl : slices) bytes.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
+  // HealthCheckResponse{status = 1}: field 1, varint -> 0x08 0x01.
+  return bytes.size() == 2 && bytes[0] == 0x08 ? bytes[1] : -1;
+}
+
+TEST(AggregatorProcess, HealthIsServedInPlaintextOnItsOwnPort) {
+  const std::string dir = (fs::current_path() / "aggregator_health").string();
+  int grpc_port = 0;
+  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+                                    "127.0.0.1:0", "--health-listen", "127.0.0.1:0", "--insecure"},
+                                   dir, "grpc", grpc_port);
+  const int health = rt::ReadPorts(dir + "/ports")["health"];
+  ASSERT_GT(health, 0);
+  EXPECT_EQ(HealthCheck("127.0.0.1:" + std::to_string(health)), 1);
+  EXPECT_EQ(HealthCheck("127.0.0.1:" + std::to_string(grpc_port)), 1);  // and on the service port
+  // Only health there: the Aggregator service is not on the health port.
+  auto stub = v1::Aggregator::NewStub(grpc::CreateChannel("127.0.0.1:" + std::to_string(health),
+                                                          grpc::InsecureChannelCredentials()));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + 3s);
+  v1::AggregatorStatus status;
+  EXPECT_EQ(stub->GetStatus(&ctx, v1::GetStatusRequest{}, &status).error_code(), grpc::StatusCode::UNIMPLEMENTED);
 }
 
 TEST(AggregatorProcess, ASceneWithoutSafetyIsAClearError) {

@@ -1,5 +1,7 @@
 #include "ruffini/service/tls.h"
 
+#include <filesystem>
+
 #include <grpc/grpc_security_constants.h>
 #include <grpc/support/log.h>
 #include <grpcpp/security/auth_context.h>
@@ -51,8 +53,13 @@ TlsConfig LoadTls(const std::string& tls_dir, bool insecure, const std::string& 
   t.dir = tls_dir;
   t.name = name;
   t.ca_pem = ReadPem(tls_dir + "/ca.crt");
-  t.cert_pem = ReadPem(tls_dir + "/" + name + ".crt");
-  t.key_pem = ReadPem(tls_dir + "/" + name + ".key");
+  // NAME.crt / NAME.key (make-dev-ca.sh's folder of every certificate), else tls.crt / tls.key (a Kubernetes
+  // TLS Secret mounted for one service).
+  const bool own = std::filesystem::exists(tls_dir + "/" + name + ".crt") ||
+                   !std::filesystem::exists(tls_dir + "/tls.crt");
+  t.name = own ? name : "tls";
+  t.cert_pem = ReadPem(tls_dir + "/" + t.name + ".crt");
+  t.key_pem = ReadPem(tls_dir + "/" + t.name + ".key");
   return t;
 }
 

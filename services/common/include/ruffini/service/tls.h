@@ -24,7 +24,8 @@ struct TlsConfig {
   std::string ca_pem, cert_pem, key_pem;
 };
 
-// Exactly one of tls_dir (not empty) and insecure. Reads DIR/ca.crt, DIR/NAME.crt and DIR/NAME.key; throws
+// Exactly one of tls_dir (not empty) and insecure. Reads DIR/ca.crt, DIR/NAME.crt and DIR/NAME.key (or, when
+// DIR has no NAME.crt, DIR/tls.crt and DIR/tls.key: a Kubernetes TLS Secret mounted as a folder); throws
 // InputError naming the flag or the file that is missing or unreadable.
 TlsConfig LoadTls(const std::string& tls_dir, bool insecure, const std::string& name);
 // Logs what the service will do: info for mutual TLS, a warning (with what it means) for plaintext.
