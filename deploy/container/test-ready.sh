@@ -31,7 +31,7 @@ desc="nothing listening: not alive"; check bash -c "! '$ready' --alive 1 >/dev/n
 desc="nothing listening: not ready"; check bash -c "! '$ready' 1 >/dev/null"
 
 # 2. The chain.
-"$bin/ruffini-aggregator" --scene "$scene" --listen 127.0.0.1:0 --metrics 127.0.0.1:0 \
+"$bin/ruffini-aggregator" --scene "$scene" --listen 127.0.0.1:0 --metrics 127.0.0.1:0 --insecure \
   --ports-file "$work/agg.ports" >"$work/agg.log" 2>&1 &
 agg=$!; pids+=("$agg")
 "$bin/ruffini-sim" --scene "$scene" --scenario "$repo/config/scenarios/cobot-demo.yaml" --rate-hz 1000 \
@@ -40,7 +40,7 @@ sim=$!; pids+=("$sim")
 agg_port=$(port_of "$work/agg.ports" grpc) || { echo "FAIL: the aggregator reported no port"; cat "$work/agg.log"; exit 1; }
 sim_port=$(port_of "$work/sim.ports" stream) || { echo "FAIL: the sim reported no port"; cat "$work/sim.log"; exit 1; }
 "$bin/ruffini-decoder" --scene "$scene" --patch forearm_a --interrogator "127.0.0.1:$sim_port" \
-  --aggregator "127.0.0.1:$agg_port" --metrics 127.0.0.1:0 --ports-file "$work/dec.ports" >"$work/dec.log" 2>&1 &
+  --aggregator "127.0.0.1:$agg_port" --metrics 127.0.0.1:0 --insecure --ports-file "$work/dec.ports" >"$work/dec.log" 2>&1 &
 dec=$!; pids+=("$dec")
 m=$(port_of "$work/dec.ports" metrics) || { echo "FAIL: the decoder reported no metrics port"; cat "$work/dec.log"; exit 1; }
 

@@ -51,7 +51,8 @@ class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
   // Loop thread (guard held by the caller through Offer's own lock).
   void Offer(const Msg& m, std::int64_t mono_ns) {
     std::lock_guard lock(guard_->mu);
-    if (!guard_->alive || finishing_) return;
+    // After Finish (ours, or after a failed write) and before OnDone, nothing may be started on the stream.
+    if (!guard_->alive || finishing_ || finished_) return;
     if (writing_) {
       pending_ = m;  // replaces an older pending state: the newest wins (seq and stop_epoch tell what was skipped)
       return;
@@ -73,7 +74,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
   // Ends the stream after the write in flight (if any) with this status.
   void FinishWith(const grpc::Status& status) {
     std::lock_guard lock(guard_->mu);
-    if (!guard_->alive || finishing_) return;
+    if (!guard_->alive || finishing_ || finished_) return;
     finishing_ = true;
     final_ = status;
     if (!writing_) {

@@ -417,7 +417,11 @@ TEST(DecoderTest, GateHysteresisDoesNotFlap) {
 
 class ModelFileTest : public ::testing::Test {
  protected:
-  std::string path = (std::filesystem::temp_directory_path() / "ruffini_decode_test.rmodel").string();
+  // One file per test (ctest runs them as parallel processes).
+  std::string path = (std::filesystem::temp_directory_path() /
+                      ("ruffini_decode_test_" +
+                       std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + ".rmodel"))
+                         .string();
   void TearDown() override { std::filesystem::remove(path); }
   std::string Error() {
     try {
