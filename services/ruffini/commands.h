@@ -10,5 +10,6 @@ void RegisterBenchCommand(CLI::App& app);
 void RegisterBenchServiceCommand(CLI::App& app);
 void RegisterBenchAggregatorCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
+void RegisterResetCommand(CLI::App& app);
 
 }  // namespace ruffini::cli

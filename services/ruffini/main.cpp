@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   ruffini::cli::RegisterBenchServiceCommand(app);
   ruffini::cli::RegisterBenchAggregatorCommand(app);
   ruffini::cli::RegisterDemoCommand(app);
+  ruffini::cli::RegisterResetCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& e) {
