@@ -301,7 +301,8 @@ TEST(ControllerProcess, ThePythonExampleSeesTheFaultStates) {
   int port = 0;
   rt::Process agg = StartAggregator(base + "/aggregator", "127.0.0.1:0", port);
   rt::Process py({RUFFINI_PYTHON, kSrc + "/services/controller/python/watch_safety.py", "--aggregator",
-                  "127.0.0.1:" + std::to_string(port), "--duration-s", "2", "--stubs", RUFFINI_PYTHON_STUBS},
+                  "127.0.0.1:" + std::to_string(port), "--duration-s", "2", "--stubs", RUFFINI_PYTHON_STUBS,
+                  "--insecure"},
                  base + "/python");
   EXPECT_EQ(py.WaitExit(20s), 0) << py.stderr_text();
   const std::string out = py.stdout_text();
@@ -313,6 +314,36 @@ TEST(ControllerProcess, ThePythonExampleSeesTheFaultStates) {
   ASSERT_TRUE(std::regex_search(out, m, counts)) << out;
   EXPECT_GT(std::stoi(m[1].str()), 100);  // 2 s at one per 10 ms
   EXPECT_EQ(m[1].str(), m[2].str());
+  EXPECT_EQ(agg.Stop(), 0);
+}
+
+TEST(ControllerProcess, ThePythonExampleSpeaksMutualTls) {
+  const std::string base = Base("python_tls");
+  {
+    rt::Process probe({RUFFINI_PYTHON, "-c", "import grpc, google.protobuf"}, base + "/probe");
+    if (probe.WaitExit(20s) != 0) GTEST_SKIP() << RUFFINI_PYTHON << " has no grpc module (Debian: python3-grpcio)";
+  }
+  if (!fs::exists(std::string(RUFFINI_PYTHON_STUBS) + "/ruffini/v1/aggregator_pb2_grpc.py")) {
+    GTEST_SKIP() << "no generated Python stubs (grpc_python_plugin missing at configure time)";
+  }
+  if (std::system("command -v openssl >/dev/null 2>&1") != 0) GTEST_SKIP() << "openssl not installed";
+  const std::string certs = base + "/certs";
+  ASSERT_EQ(std::system(("bash " + kSrc + "/deploy/tls/make-dev-ca.sh " + certs + " >/dev/null 2>&1").c_str()), 0);
+  const std::string dir = base + "/aggregator";
+  fs::create_directories(dir);
+  rt::Process agg({RUFFINI_AGGREGATOR_EXE, "--tls-dir", certs, "--scene", kScene, "--listen", "127.0.0.1:0",
+                   "--metrics", "127.0.0.1:0", "--ports-file", dir + "/ports"},
+                  dir);
+  ASSERT_TRUE(rt::WaitFor([&] { return ReadPorts(dir + "/ports").count("grpc") > 0 || !agg.Running(); }, 15s));
+  const int port = ReadPorts(dir + "/ports")["grpc"];
+  ASSERT_GT(port, 0) << agg.stderr_text();
+  rt::Process py({RUFFINI_PYTHON, kSrc + "/services/controller/python/watch_safety.py", "--aggregator",
+                  "127.0.0.1:" + std::to_string(port), "--duration-s", "2", "--stubs", RUFFINI_PYTHON_STUBS,
+                  "--tls-dir", certs},
+                 base + "/python");
+  EXPECT_EQ(py.WaitExit(20s), 0) << py.stderr_text();
+  const std::string out = py.stdout_text();
+  EXPECT_NE(out.find("FAULT epoch 1 cause KIND_STARTUP"), std::string::npos) << out << py.stderr_text();
   EXPECT_EQ(agg.Stop(), 0);
 }
 

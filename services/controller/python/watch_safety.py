@@ -16,6 +16,7 @@ proto/ruffini/v1/ (protoc with /usr/bin/grpc_python_plugin, into build/<preset>/
 Exit codes: 0 after --duration-s or on Ctrl-C, 1 when the stubs or grpc cannot be imported, 2 usage.
 """
 import argparse
+import os
 import collections
 import signal
 import sys
@@ -30,6 +31,10 @@ def main():
     parser.add_argument("--duration-s", type=float, default=0.0, help="stop after this long (0: until Ctrl-C)")
     parser.add_argument("--timeout-ms", type=float, default=30.0, help="halt when no state came for this long")
     parser.add_argument("--subscriber", default="watch_safety.py", help="the name given to the aggregator")
+    tls = parser.add_mutually_exclusive_group(required=True)
+    tls.add_argument("--tls-dir", help="mutual TLS: ca.crt and this client's controller.crt / controller.key "
+                     "(deploy/tls/make-dev-ca.sh), as the C++ services read them")
+    tls.add_argument("--insecure", action="store_true", help="plaintext (an --insecure aggregator)")
     args = parser.parse_args()
 
     if args.stubs:
@@ -75,7 +80,17 @@ def main():
     # Reconnect quickly: gRPC's default backoff is 1 s growing to 120 s.
     options = [("grpc.initial_reconnect_backoff_ms", 100), ("grpc.min_reconnect_backoff_ms", 100),
                ("grpc.max_reconnect_backoff_ms", 1000)]
-    channel = grpc.insecure_channel(args.aggregator, options=options)
+    if args.insecure:
+        print("--insecure: PLAINTEXT gRPC, no TLS and no identity", file=sys.stderr, flush=True)
+        channel = grpc.insecure_channel(args.aggregator, options=options)
+    else:
+        def read(name):
+            with open(os.path.join(args.tls_dir, name), "rb") as f:
+                return f.read()
+        own = "controller" if os.path.exists(os.path.join(args.tls_dir, "controller.crt")) else "tls"
+        creds = grpc.ssl_channel_credentials(root_certificates=read("ca.crt"), private_key=read(own + ".key"),
+                                             certificate_chain=read(own + ".crt"))
+        channel = grpc.secure_channel(args.aggregator, creds, options=options)
     stub = aggregator_pb2_grpc.AggregatorStub(channel)
     calls = []
 
