@@ -73,11 +73,7 @@ int main(int argc, char** argv) {
     spdlog::info("signal {}: sending FAULT to every subscriber and stopping", sig);
     server.Stop();
     spdlog::info("stopped");
-    // Everything is closed and joined. Exit without the remaining destructors: the metrics exposer's web
-    // server (civetweb) waits out its one-second poll timeout when stopped, which would hold up every restart.
-    spdlog::shutdown();
-    std::fflush(nullptr);
-    std::_Exit(0);
+    ruffini::service::ExitAfterCleanStop();
   } catch (const ruffini::InputError& e) {
     spdlog::error("{}", e.what());
     return 1;

@@ -13,6 +13,7 @@
 
 #include "aggregator_bench.h"
 #include "commands.h"
+#include "ruffini/service/common.h"
 #include "ruffini/error.h"
 #include "ruffini/service/child.h"
 
@@ -82,9 +83,7 @@ void RegisterBenchAggregator(CLI::App& app) {
   cmd->callback([a]() {
     AggregatorBenchOptions& o = a->o;
     std::error_code ec;
-    const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-    if (ec) throw InputError("bench-aggregator: cannot read /proc/self/exe: " + ec.message());
-    o.bin_dir = self.parent_path().string();
+    o.bin_dir = service::ExecutableDir();
     CheckAggregatorExecutables(o.bin_dir);
     const bool temp_work = a->work_dir.empty();
     o.work_dir = temp_work ? (fs::temp_directory_path() / ("ruffini-bench-aggregator-" + std::to_string(getpid()))).string()

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "commands.h"
+#include "ruffini/service/common.h"
 #include "ruffini/error.h"
 #include "service_bench.h"
 
@@ -57,9 +58,7 @@ void RegisterBenchService(CLI::App& app) {
   cmd->callback([a]() {
     ServiceBenchOptions& o = a->o;
     std::error_code ec;
-    const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-    if (ec) throw InputError("bench-service: cannot read /proc/self/exe: " + ec.message());
-    o.bin_dir = self.parent_path().string();
+    o.bin_dir = service::ExecutableDir();
     CheckServiceExecutables(o.bin_dir);
     const bool temp_work = a->work_dir.empty();
     o.work_dir = temp_work ? (fs::temp_directory_path() / ("ruffini-bench-service-" + std::to_string(getpid()))).string()

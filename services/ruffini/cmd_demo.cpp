@@ -8,6 +8,7 @@
 
 #include "commands.h"
 #include "demo.h"
+#include "ruffini/service/common.h"
 #include "ruffini/error.h"
 
 namespace ruffini::cli {
@@ -31,9 +32,7 @@ void RegisterDemoCommand(CLI::App& app) {
                   "operator); default: every process --insecure on loopback")
       ->check(CLI::ExistingDirectory);
   cmd->callback([o]() {
-    std::error_code ec;
-    const auto self = std::filesystem::read_symlink("/proc/self/exe", ec);
-    o->bin_dir = self.parent_path().string();
+    o->bin_dir = service::ExecutableDir();
     const DemoResult r = RunDemo(*o, [](const std::string& line) {
       std::printf("%s\n", line.c_str());
       std::fflush(stdout);

@@ -1,6 +1,7 @@
 #include "ruffini/service/common.h"
 
 #include <openssl/evp.h>
+#include <spdlog/spdlog.h>
 #include <pthread.h>
 #include <signal.h>
 #include <unistd.h>
@@ -9,6 +10,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -132,6 +134,19 @@ void AnnouncePorts(const std::string& path, const std::vector<std::pair<std::str
   std::printf("%s\n", line.c_str());
   std::fflush(stdout);
   if (!path.empty()) WriteFileAtomically(path, file);
+}
+
+void ExitAfterCleanStop() {
+  spdlog::shutdown();
+  std::fflush(nullptr);
+  std::_Exit(0);
+}
+
+std::string ExecutableDir() {
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (ec) throw InputError("cannot read /proc/self/exe: " + ec.message());
+  return self.parent_path().string();
 }
 
 std::int64_t UnixNowNs() noexcept {

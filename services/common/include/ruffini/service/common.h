@@ -38,6 +38,15 @@ int WaitForStopSignal();
 // Writes a ports file ("key P" lines) when path is not empty, and prints "ports: key P key P" on stdout.
 void AnnouncePorts(const std::string& path, const std::vector<std::pair<std::string, int>>& ports);
 
+// A service's last step after it stopped cleanly (links closed, threads joined): flush the logs and exit 0
+// without the remaining destructors. The metrics exposer's web server (civetweb) waits out its one-second poll
+// timeout when destroyed, which would hold up every restart by a second.
+[[noreturn]] void ExitAfterCleanStop();
+
+// The folder of the running executable (/proc/self/exe), where the other Ruffini executables are installed.
+// Throws InputError when it cannot be read.
+std::string ExecutableDir();
+
 // Unix time now, ns.
 std::int64_t UnixNowNs() noexcept;
 // The steady clock now, ns.
