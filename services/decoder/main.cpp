@@ -23,8 +23,10 @@ int main(int argc, char** argv) {
       ->required()->check(CLI::ExistingFile);
   app.add_option("--patch", config.patch, "The scene's patch this decoder serves (default: the only one)");
   app.add_option("--interrogator", interrogator, "The interrogator's peak-stream port, HOST:PORT")->required();
-  app.add_option("--channel", config.channel, "Interrogator channel of the fibre (default: the patch's place in the scene)")
-      ->check(CLI::Range(0, 15));
+  app.add_option("--channel", config.channel,
+                 "Interrogator channel of the fibre, 1 to 16 as the instrument's panel and its vendor's API count "
+                 "(default: the patch's place in the scene, the first patch on channel 1)")
+      ->check(CLI::Range(1, 16));
   app.add_option("--aggregator", aggregator, "The aggregator's gRPC address, HOST:PORT")->required();
   app.add_option("--metrics", metrics, "Where to serve Prometheus metrics, HOST:PORT (port 0: pick a free one)")
       ->capture_default_str();
@@ -39,6 +41,10 @@ int main(int argc, char** argv) {
                  "Interrogator silence before a fault, ms (default: 3 frame periods, at least 15 ms)");
   app.add_option("--reject-fault-frames", config.reject_fault_frames,
                  "Frames rejected in a row before a fault (default: 20 ms of frames, at least 3)");
+  app.add_option("--freshness-budget-ms", config.freshness_budget_ms,
+                 "A frame or message older than this in the decoder's own queues is dropped and reported, ms "
+                 "(docs/safety-channel.md)")
+      ->capture_default_str();
   app.add_option("--ports-file", ports_file, "Write the chosen metrics port here ('metrics P')");
   auto* tls_opt = app.add_option("--tls-dir", config.tls_dir,
                                  "Mutual TLS: DIR/ca.crt, DIR/decoder-PATCH.crt and DIR/decoder-PATCH.key (docs/security.md)")

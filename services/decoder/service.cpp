@@ -20,6 +20,8 @@
 #include "ruffini/service/process_metrics.h"
 #include "ruffini/service/tls.h"
 #include "ruffini/ingest/hyperion.h"
+#include "ruffini/channel/checkers.h"
+#include "ruffini/channel/crc.h"
 #include "ruffini/link/to_proto.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
@@ -278,6 +280,9 @@ struct DecoderService::Impl {
   std::shared_ptr<grpc::Channel> channel_to_aggregator;
   std::mutex ctx_mutex;
   grpc::ClientContext* live_ctx = nullptr;  // the publisher's current stream (to cancel it on Stop)
+  // The safety layer (docs/safety-channel.md): this process's run id and the freshness budget.
+  const std::uint64_t run_id = ruffini::channel::DrawRunId();
+  std::int64_t freshness_budget_ns = 20'000'000;
 
   void DecodeLoop();
   void PublishLoop();
@@ -316,6 +321,12 @@ void DecoderService::Impl::DecodeLoop() {
       const link::Now now = NowBoth();
       switch (item.kind) {
         case IngestItem::Kind::kFrame: {
+          if (now.mono_ns - item.recv_mono_ns > freshness_budget_ns) {
+            // Waited past the budget in ring A: never decode it as if current; report it as an overload.
+            stats.late_frames.fetch_add(1, std::memory_order_relaxed);
+            mon.OnFramesDropped(1, now, *sink);
+            break;
+          }
           mon.OnFrame(item.frame, now, *sink);
           const std::int64_t done = service::MonoNowNs();
           stats.decode_seconds.ObserveNs(done - now.mono_ns);
@@ -358,17 +369,25 @@ bool DecoderService::Impl::PublishOneStream() {
     live_ctx = &ctx;
   }
   auto stream = stub->Connect(&ctx);
-  const std::int64_t stream_start = service::MonoNowNs();
   std::uint64_t seq = 0;
   std::atomic<bool> refused{false}, resend{false}, accepted{false};
+  std::atomic<std::uint64_t> aggregator_run{0};  // from HelloAccepted: every later message is addressed to it
   v1::PatchMessage out;
+  // The safety layer on every message: run id, send time on the steady clock, addressee, CRC (sealed last).
+  auto seal_and_write = [&](const grpc::WriteOptions& options) {
+    out.set_sender_run_id(run_id);
+    out.set_sender_steady_ns(service::MonoNowNs());
+    ruffini::channel::Seal(out);
+    return stream->Write(out, options);
+  };
   auto write_hello = [&] {
     out.Clear();
     out.set_patch_id(patch_id);
     out.set_seq(++seq);
     out.set_decoder_t_ns(service::UnixNowNs());
     *out.mutable_hello() = hello;
-    return stream->Write(out);
+    out.set_aggregator_run_id(aggregator_run.load());  // 0 on the first: whichever aggregator answers
+    return seal_and_write(grpc::WriteOptions());
   };
   bool ok = write_hello();
   std::atomic<bool> reader_done{false};
@@ -376,6 +395,7 @@ bool DecoderService::Impl::PublishOneStream() {
     v1::AggregatorCommand cmd;
     while (stream->Read(&cmd)) {
       if (cmd.has_hello_accepted()) {
+        aggregator_run = cmd.hello_accepted().aggregator_run_id();
         accepted = true;
         spdlog::info("aggregator {}: hello accepted (patch {}, watchdog {} ms)", config.aggregator.str(),
                      cmd.hello_accepted().patch_id(), static_cast<double>(cmd.hello_accepted().watchdog_ns()) / 1e6);
@@ -395,9 +415,23 @@ bool DecoderService::Impl::PublishOneStream() {
     stats.aggregator_connects.fetch_add(1, std::memory_order_relaxed);
     spdlog::info("aggregator {}: Connect stream open", config.aggregator.str());
   }
+  // Nothing but the hello goes out before the aggregator answers it (the messages name its run). Messages
+  // made before the answer are stale for this stream; a hello unanswered for 2 s ends the stream.
+  const std::int64_t hello_deadline = service::MonoNowNs() + 2'000'000'000;
+  while (ok && !accepted.load() && !refused.load() && !reader_done.load() && !stop_publish.load()) {
+    if (service::MonoNowNs() > hello_deadline) {
+      stats.hello_timeouts.fetch_add(1, std::memory_order_relaxed);
+      spdlog::warn("aggregator {}: no answer to the hello within 2 s; reconnecting", config.aggregator.str());
+      ok = false;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  const std::int64_t stream_start = service::MonoNowNs();
   bool first_contact = true;
   bool finished_cleanly = false;
-  while (ok && !refused) {
+  bool late_reported = false;  // one `late` fault per run of late messages
+  while (ok && !refused && accepted) {
     if (resend.exchange(false)) ok = write_hello();
     if (!ok) break;
     if (!message_ready.try_acquire_for(milliseconds(50))) {
@@ -416,16 +450,42 @@ bool DecoderService::Impl::PublishOneStream() {
       stats.stale_discarded.fetch_add(1, std::memory_order_relaxed);
       continue;
     }
+    const std::int64_t waited_ns = service::MonoNowNs() - m.mono_ns;
+    if (waited_ns > freshness_budget_ns) {
+      // Waited past the budget in ring B (a slow link, a stalled publisher): never send it as if current.
+      // Report it once per run of late messages: the aggregator faults the patch (KIND_PATCH_FAULT, late).
+      stats.late_messages.fetch_add(1, std::memory_order_relaxed);
+      if (!late_reported) {
+        late_reported = true;
+        out.Clear();
+        out.set_patch_id(patch_id);
+        out.set_seq(++seq);
+        out.set_interrogator_serial(m.serial);
+        out.set_t_ns(m.t_ns);
+        out.set_decoder_t_ns(service::UnixNowNs());
+        out.set_aggregator_run_id(aggregator_run.load());
+        v1::PatchFault& f = *out.mutable_fault();
+        f.set_code(v1::PATCH_FAULT_CODE_LATE);
+        f.set_message("a message waited " + std::to_string(waited_ns / 1'000'000) +
+                      " ms in the decoder's queue (budget " + std::to_string(freshness_budget_ns / 1'000'000) +
+                      " ms); dropped");
+        ok = seal_and_write(grpc::WriteOptions());
+        if (ok) stats.messages_sent[2].fetch_add(1, std::memory_order_relaxed);
+      }
+      continue;
+    }
+    late_reported = false;
     if (m.kind == link::Message::Kind::kContact) {
       // The first contact on a new stream opens the contact for the aggregator, whatever came before it.
       if (first_contact && !m.contact.released) m.contact.onset = true;
       first_contact = false;
     }
     link::ToProto(m, patch_id, ++seq, out);
+    out.set_aggregator_run_id(aggregator_run.load());
     // More messages already queued: let gRPC hold this one back and send them together (fewer syscalls).
     grpc::WriteOptions options;
     if (message_ring->read_available() > 0) options.set_buffer_hint();
-    ok = stream->Write(out, options);
+    ok = seal_and_write(options);
     if (ok) stats.messages_sent[static_cast<std::size_t>(m.kind)].fetch_add(1, std::memory_order_relaxed);
     if (ok && m.kind == link::Message::Kind::kFault && m.fault.code == link::FaultCode::kShuttingDown) {
       finished_cleanly = true;
@@ -488,14 +548,20 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
   s.tls = service::LoadTls(s.config.tls_dir, s.config.insecure, "decoder-" + s.patch_id);
   service::LogTls(s.tls, "the aggregator cannot tell who publishes this patch");
   const auto index = static_cast<std::size_t>(s.patch - s.scene.patches.data());
-  if (s.config.channel >= static_cast<int>(ingest::kChannels)) {
-    throw InputError("--channel " + std::to_string(s.config.channel) + ": expected 0 to 15");
+  // Channels count from 1, as the instrument's panel and its vendor's API do; 0 picks the patch's place.
+  if (s.config.channel < 0 || s.config.channel > static_cast<int>(ingest::kChannels)) {
+    throw InputError("--channel " + std::to_string(s.config.channel) + ": expected 1 to " +
+                     std::to_string(ingest::kChannels) + " (the instrument's numbering), or 0 for the patch's place");
   }
-  s.channel = s.config.channel >= 0 ? static_cast<std::size_t>(s.config.channel) : index;
+  s.channel = s.config.channel > 0 ? static_cast<std::size_t>(s.config.channel - 1) : index;
   if (s.channel >= ingest::kChannels) {
-    throw InputError("patch '" + s.patch_id + "' is patch " + std::to_string(index) +
+    throw InputError("patch '" + s.patch_id + "' is patch " + std::to_string(index + 1) +
                      " of the scene, beyond the interrogator's 16 channels: give --channel");
   }
+  if (!(s.config.freshness_budget_ms >= 1.0 && s.config.freshness_budget_ms <= 10'000.0)) {
+    throw InputError("--freshness-budget-ms " + std::to_string(s.config.freshness_budget_ms) + ": expected 1 to 10000");
+  }
+  s.freshness_budget_ns = static_cast<std::int64_t>(s.config.freshness_budget_ms * 1e6);
   s.model_path = s.config.model_path.empty() ? s.patch->model_path : s.config.model_path;
   if (s.model_path.empty()) {
     throw InputError(s.scene.source + ": patch '" + s.patch_id + "' names no model (`model:`); give --model");

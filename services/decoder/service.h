@@ -12,7 +12,10 @@
 // overload fault). When ring B is full, heartbeats and mid-contact frames are dropped and counted (the next
 // heartbeat carries fresh health anyway), while onsets, releases and faults wait in a bounded overflow on
 // the decode thread and go first once there is room. A message made before the current aggregator stream
-// began is never sent on it (no stale contacts after a reconnect).
+// began is never sent on it (no stale contacts after a reconnect), and none that waited past the freshness
+// budget in the decoder's own rings is either (docs/safety-channel.md). Every message carries the safety
+// layer: this process's run id, its steady-clock send time, the aggregator run it is addressed to (from
+// HelloAccepted; the publisher sends nothing but the hello before that) and a CRC.
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -26,7 +29,7 @@ struct ServiceConfig {
   std::string scene_path;
   std::string patch;                 // the scene's patch name ("" : the only one)
   service::HostPort interrogator;    // the peak-stream port
-  int channel = -1;                  // -1: the patch's index in the scene
+  int channel = 0;                   // 1..16 as the instrument's panel counts; 0: the patch's place in the scene
   service::HostPort aggregator;
   service::HostPort metrics;         // port 0: pick a free one
   std::string model_path;            // "": the scene's `model:` for the patch
@@ -36,6 +39,10 @@ struct ServiceConfig {
   double silence_ms = 0.0;           // 0: 3 frame periods
   int reject_fault_frames = 0;       // 0: 20 ms of frames (at least 3)
   bool allow_missing = true;         // a dark grating (15 peaks) is a missing peak, not a rejected frame
+  // The safety layer's freshness budget (docs/safety-channel.md): a frame or message that waited longer than
+  // this in the decoder's own queues is dropped and reported (an overload fault for ring A, a `late` fault
+  // for ring B), never sent as if current.
+  double freshness_budget_ms = 20.0;
   // The aggregator link: exactly one of tls_dir (mutual TLS with DIR/ca.crt, DIR/decoder-PATCH.crt and .key,
   // docs/security.md) and insecure (plaintext).
   std::string tls_dir;

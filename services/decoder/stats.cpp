@@ -121,6 +121,11 @@ std::vector<MetricFamily> StatsCollectable::Collect() const {
         s.aggregator_connected.load() ? 1.0 : 0.0);
   counter("ruffini_decoder_aggregator_connects_total", "Connect streams opened to the aggregator.", s.aggregator_connects);
   counter("ruffini_decoder_hello_refused_total", "Hellos the aggregator refused.", s.hello_refused);
+  counter("ruffini_decoder_hello_timeouts_total", "Connect streams given up because the hello got no answer in time.",
+          s.hello_timeouts);
+  counter("ruffini_decoder_late_frames_total",
+          "Interrogator frames that waited past the freshness budget before decoding (dropped; an overload fault).",
+          s.late_frames);
   {
     auto& f = family("ruffini_decoder_messages_sent_total", "Messages sent to the aggregator, by kind.", MetricType::Counter);
     static constexpr std::array<std::string_view, 3> kKinds = {"contact", "heartbeat", "fault"};
@@ -130,11 +135,13 @@ std::vector<MetricFamily> StatsCollectable::Collect() const {
     auto& f = family("ruffini_decoder_messages_dropped_total",
                      "Messages not sent: ring_full (heartbeats and mid-contact frames on a full ring), critical "
                      "(onsets, releases, faults lost on an overflowing ring), stale (made before the current "
-                     "aggregator stream began).",
+                     "aggregator stream began), late (waited past the freshness budget in the decoder's queue; "
+                     "reported to the aggregator as a `late` fault).",
                      MetricType::Counter);
     add(f, Load(s.messages_dropped), {{"cause", "ring_full"}});
     add(f, Load(s.critical_dropped), {{"cause", "critical"}});
     add(f, Load(s.stale_discarded), {{"cause", "stale"}});
+    add(f, Load(s.late_messages), {{"cause", "late"}});
   }
   return out;
 }

@@ -40,6 +40,9 @@ struct Stats {
   // Publisher thread.
   std::atomic<bool> aggregator_connected{false};
   std::atomic<std::uint64_t> aggregator_connects{0}, hello_refused{0}, stale_discarded{0};
+  std::atomic<std::uint64_t> late_frames{0};    // frames that waited past the freshness budget in ring A
+  std::atomic<std::uint64_t> late_messages{0};  // messages that waited past the freshness budget in ring B
+  std::atomic<std::uint64_t> hello_timeouts{0}; // streams ended because the hello got no answer in time
   std::array<std::atomic<std::uint64_t>, 3> messages_sent{};  // by link::Message::Kind
 };
 

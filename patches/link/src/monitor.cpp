@@ -22,6 +22,7 @@ std::string_view FaultName(FaultCode c) noexcept {
     case FaultCode::kOverloaded: return "overloaded";
     case FaultCode::kShuttingDown: return "shutting_down";
     case FaultCode::kInternal: return "internal";
+    case FaultCode::kLate: return "late";
   }
   return "unknown";
 }

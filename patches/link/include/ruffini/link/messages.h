@@ -25,8 +25,9 @@ enum class FaultCode : std::uint8_t {
   kOverloaded = 8,
   kShuttingDown = 9,
   kInternal = 10,
+  kLate = 11,  // sent by the publisher (a message waited past the freshness budget), never by the monitor
 };
-inline constexpr std::size_t kFaultCodeCount = 11;
+inline constexpr std::size_t kFaultCodeCount = 12;
 // snake_case, stable (metric label values).
 std::string_view FaultName(FaultCode c) noexcept;
 
