@@ -338,11 +338,17 @@ Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int
         hb.active_fault = safety::PatchFaultCode::kInternal;
       }
       if (!time_plausible) {
-        // The frame this heartbeat vouches for is implausibly far from now: the patch's data is not current.
+        // The frame this heartbeat vouches for is implausibly far from now: the patch's data is not current
+        // (a fault of its own unless the decoder already names one).
         Bad(BadInput::kImplausibleTime);
-        hb.active_fault = safety::PatchFaultCode::kLate;
+        if (hb.active_fault == safety::PatchFaultCode::kUnspecified) hb.active_fault = safety::PatchFaultCode::kLate;
       }
       hb.in_contact = m.heartbeat().in_contact();
+      if (hb.healthy && hb.active_fault == safety::PatchFaultCode::kUnspecified && !hb.in_contact) {
+        // The decoder's gate is closed: the contact has ended here too (as in the policy), also a doubt's.
+        link.in_contact = false;
+        link.doubtful = false;
+      }
       Note(policy_.OnHeartbeat(data_, id, hb, now_ns));
       break;
     }
