@@ -1,5 +1,6 @@
 #include "scene_setup.h"
 
+#include <random>
 #include <sstream>
 
 #include "ruffini/error.h"
@@ -10,6 +11,14 @@
 #include "ruffini/twin/scene.h"
 
 namespace ruffini::aggregator {
+
+std::uint64_t DrawRunId() {
+  // std::random_device is the OS's entropy source on Linux (getrandom); two draws make 64 bits.
+  std::random_device rd;
+  std::uint64_t id = 0;
+  while (id == 0) id = (static_cast<std::uint64_t>(rd()) << 32) ^ static_cast<std::uint64_t>(rd());
+  return id;
+}
 
 aggregate::Setup SetupFromScene(const std::string& scene_path) {
   const SceneFile file = LoadSceneFile(scene_path);
@@ -30,6 +39,8 @@ aggregate::Setup SetupFromScene(const std::string& scene_path) {
     e.id = p.name;
     e.spec_name = p.spec.name;
     e.spec_fingerprint = p.spec.Fingerprint();
+    e.extent_y_mm = p.spec.extent_y_mm;
+    e.extent_r_deg = p.spec.extent_r_deg;
     if (!p.model_path.empty()) e.model_sha256 = service::Sha256OfFile(p.model_path);
     if (robot) {
       const robot::MountedPatch* m = robot->FindPatch(p.name);
@@ -39,6 +50,8 @@ aggregate::Setup SetupFromScene(const std::string& scene_path) {
     setup.patches.push_back(std::move(e));
   }
   setup.instance = service::InstanceName();
+  setup.robot_name = file.name;
+  setup.run_id = DrawRunId();
   return setup;
 }
 
@@ -52,6 +65,7 @@ std::string Describe(const aggregate::Setup& setup) {
   }
   out << "); regions:";
   for (const auto& r : setup.safety.regions) out << " " << r.name << " > " << r.threshold_n << " N stops;";
+  out << " robot name '" << setup.robot_name << "', run id " << std::hex << setup.run_id << std::dec << ";";
   out << " robot: " << (setup.robot ? setup.robot->name() + " (" + std::to_string(setup.robot->num_dof()) + " joints)" : "none");
   return out.str();
 }

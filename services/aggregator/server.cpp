@@ -320,6 +320,16 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
     cv.notify_one();
   }
   void Loop();
+  // The Core's takeover: Finish the replaced stream's call (its reactor, if still there). Loop thread.
+  std::map<int, std::function<void()>> stream_enders;
+  void EndStream(int stream) {
+    auto it = stream_enders.find(stream);
+    if (it == stream_enders.end()) return;
+    auto end = std::move(it->second);
+    stream_enders.erase(it);
+    end();
+  }
+  void LogEvents();
   void PublishSafety();
   void PublishContacts();
   void CopyStats();
@@ -355,6 +365,10 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
       std::lock_guard lock(guard->mu);
       if (!guard->alive) return;
       self->stream_ = impl->core->OpenStream(impl->Now(), allowed);
+      impl->stream_enders[self->stream_] = [self, guard] {
+        std::lock_guard ender_lock(guard->mu);
+        if (guard->alive) self->FinishOnce(grpc::Status(grpc::StatusCode::ABORTED, "replaced by a new stream for its patch"));
+      };
     });
     StartRead(&in_);
   }
@@ -377,6 +391,7 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
       std::lock_guard lock(guard->mu);
       if (!guard->alive) return;
       const auto reply = impl->core->OnPatchMessage(self->stream_, m, impl->Now());
+      if (reply.end_stream >= 0) impl->EndStream(reply.end_stream);
       if (reply.command) self->Send(*reply.command);
       if (reply.close) {
         if (!reply.command) {
@@ -416,7 +431,10 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
       std::lock_guard lock(guard_->mu);
       guard_->alive = false;
     }
-    impl->Post([impl, stream] { impl->core->CloseStream(stream, impl->Now()); });
+    impl->Post([impl, stream] {
+      impl->stream_enders.erase(stream);
+      impl->core->CloseStream(stream, impl->Now());
+    });
     delete this;
   }
 
@@ -451,8 +469,12 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
 class JointReactor final : public grpc::ServerReadReactor<v1::JointState> {
  public:
   JointReactor(AggregatorServer::Impl* impl, v1::PublishJointStatesResponse* response)
-      : impl_(impl), guard_(std::make_shared<Guard>()), response_(response) {
+      : impl_(impl), guard_(std::make_shared<Guard>()), response_(response), stream_(NextId()) {
     StartRead(&in_);
+  }
+  static int NextId() {
+    static std::atomic<int> next{1};
+    return next.fetch_add(1);
   }
   void OnReadDone(bool ok) override {
     auto guard = guard_;
@@ -466,8 +488,8 @@ class JointReactor final : public grpc::ServerReadReactor<v1::JointState> {
       });
       return;
     }
-    impl_->Post([self, guard, impl, js = in_] {
-      const auto r = impl->core->OnJointState(js, impl->Now());
+    impl_->Post([self, guard, impl, js = in_, stream = stream_] {
+      const auto r = impl->core->OnJointState(js, impl->Now(), stream);
       std::lock_guard lock(guard->mu);
       if (!guard->alive) return;
       auto* resp = self->response_;
@@ -490,6 +512,7 @@ class JointReactor final : public grpc::ServerReadReactor<v1::JointState> {
       std::lock_guard lock(guard_->mu);
       guard_->alive = false;
     }
+    impl_->Post([impl = impl_, stream = stream_] { impl->core->CloseJointStream(stream); });
     delete this;
   }
 
@@ -497,6 +520,7 @@ class JointReactor final : public grpc::ServerReadReactor<v1::JointState> {
   AggregatorServer::Impl* impl_;
   std::shared_ptr<Guard> guard_;
   v1::PublishJointStatesResponse* response_;
+  int stream_;
   v1::JointState in_;
 };
 
@@ -612,6 +636,7 @@ grpc::ServerUnaryReactor* AggregatorServer::Impl::ResetStop(grpc::CallbackServer
   const bool authorized = who.role == service::Role::kOperator || who.role == service::Role::kAny;
   Post([this, reactor, request, response, peer, authorized, who] {
     *response = core->OnReset(*request, authorized, Now());
+    LogEvents();
     if (!authorized) {
       stats.auth_reset_not_operator.fetch_add(1);
       spdlog::warn("ResetStop refused (UNAUTHORIZED) for {} '{}' from {}: only an operator may reset",
@@ -644,6 +669,24 @@ grpc::ServerUnaryReactor* AggregatorServer::Impl::GetStatus(grpc::CallbackServer
     reactor->Finish(grpc::Status::OK);
   });
   return reactor;
+}
+
+// Every latch, escalation, new epoch, shutdown, reset and takeover: one structured line each, here only.
+void AggregatorServer::Impl::LogEvents() {
+  for (const aggregate::Event& e : core->TakeEvents()) {
+    if (e.takeover) {
+      spdlog::warn("safety_event type=takeover patch={} replaced_stream={} epoch={}", e.cause_patch, e.replaced_stream,
+                   e.safety.stop_epoch);
+      continue;
+    }
+    const auto& c = e.safety.cause;
+    spdlog::warn("safety_event type={} state={} epoch={} cause={} patch={} force_n={} threshold_n={} doubt={} "
+                 "reset_epoch={} refusal={} operator={}",
+                 safety::EventTypeName(e.safety.type), safety::StateName(e.safety.state), e.safety.stop_epoch,
+                 safety::CauseKindName(c.kind), e.cause_patch.empty() ? "-" : e.cause_patch, c.force_n, c.threshold_n,
+                 safety::RejectionName(c.doubt), e.safety.reset_epoch, safety::ResetRefusalName(e.safety.reset_refusal),
+                 e.operator_name.empty() ? "-" : e.operator_name);
+  }
 }
 
 void AggregatorServer::Impl::PublishSafety() {
@@ -715,6 +758,7 @@ void AggregatorServer::Impl::Loop() {
       next_heartbeat += config.heartbeat_period_ns;
       if (next_heartbeat <= now) next_heartbeat = now + config.heartbeat_period_ns;
     }
+    LogEvents();
     const std::int64_t latency = core->TakeStopLatencyNs();
     if (latency >= 0) stats.frame_to_stop.ObserveNs(latency);
     if (core->TakeChanged()) PublishSafety();
@@ -815,6 +859,7 @@ void AggregatorServer::Stop() {
   std::promise<void> finished;
   s.Post([&s, &finished] {
     s.core->Shutdown(s.Now());
+    s.LogEvents();
     s.PublishSafety();
     for (auto* r : s.safety_subs) r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
     for (auto* r : s.contact_subs) r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));

@@ -164,6 +164,7 @@ class Controller {
     ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(2));
     v1::ResetStopRequest r;
     r.set_stop_epoch(epoch);
+    if (const auto st = Status()) r.set_aggregator_run_id(st->aggregator_run_id());  // the run whose epoch this is
     r.set_operator_name("ruffini bench-aggregator");
     v1::ResetStopResponse resp;
     const bool ok = stub_->ResetStop(&ctx, r, &resp).ok() && resp.accepted();

@@ -141,6 +141,7 @@ class Observer {
     ctx.set_deadline(std::chrono::system_clock::now() + 1s);
     v1::ResetStopRequest r;
     r.set_stop_epoch(epoch);
+    r.set_aggregator_run_id(Status().aggregator_run_id());  // the run whose epoch this is
     r.set_operator_name("ruffini demo");
     r.set_operator_note("scripted reset");
     v1::ResetStopResponse resp;

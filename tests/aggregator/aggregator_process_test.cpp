@@ -107,6 +107,7 @@ class Controller {
     ctx.set_deadline(std::chrono::system_clock::now() + 2s);
     v1::ResetStopRequest r;
     r.set_stop_epoch(epoch);
+    r.set_aggregator_run_id(Status().aggregator_run_id());  // the run whose epoch this is
     r.set_operator_name("aggregator_process_test");
     v1::ResetStopResponse resp;
     stub_->ResetStop(&ctx, r, &resp);

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
+#include <limits>
 
 #include "ruffini/aggregate/core.h"
 #include "ruffini/error.h"
@@ -18,6 +20,7 @@ using namespace ruffini;
 constexpr std::int64_t kT0 = 1'700'000'000'000'000'000;
 constexpr std::int64_t kMs = 1'000'000;
 const std::string kScene = std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/cobot.yaml";
+constexpr std::uint64_t kRunId = 0x5eed'1234'abcd'0001;
 
 aggregate::Setup CobotSetup() {
   const SceneFile file = LoadSceneFile(kScene);
@@ -35,6 +38,8 @@ aggregate::Setup CobotSetup() {
     e.mount = robot.FindPatch(p.name)->mount;
     s.patches.push_back(e);
   }
+  s.run_id = kRunId;
+  s.robot_name = file.name;
   return s;
 }
 
@@ -81,9 +86,44 @@ class CoreTest : public ::testing::Test {
     js.set_t_ns(t);
     return js;
   }
+  v1::ResetStopRequest ResetRequest(std::uint64_t epoch, std::uint64_t run = kRunId) const {
+    v1::ResetStopRequest r;
+    r.set_stop_epoch(epoch);
+    r.set_aggregator_run_id(run);
+    r.set_operator_name("alice");
+    return r;
+  }
+  // Every patch connected, healthy heartbeats and joint states every 10 ms for 300 ms, the start-up latch
+  // reset: CLEAR at `tc` (returned streams in scene order).
+  std::vector<int> ClearAll() {
+    std::vector<int> streams;
+    for (std::size_t i = 0; i < setup.patches.size(); ++i) streams.push_back(Connect(i, tc));
+    Beat(streams, 300);
+    const auto r = core.OnReset(ResetRequest(core.SafetyState().stop_epoch()), true, tc);
+    EXPECT_TRUE(r.accepted()) << r.message();
+    return streams;
+  }
+  // dt_ms of 10 ms steps: a healthy heartbeat on every stream (unless skipped) and a joint state.
+  void Beat(const std::vector<int>& streams, int dt_ms, int skip = -1) {
+    for (int k = 0; k < dt_ms / 10; ++k) {
+      tc += 10 * kMs;
+      core.OnJointState(Joints(tc, 0.1), tc);
+      for (std::size_t i = 0; i < streams.size(); ++i) {
+        if (static_cast<int>(i) != skip) Heartbeat(streams[i], i, tc);
+      }
+      core.Tick(tc);
+    }
+  }
+  v1::PatchMessage ContactMsg(float force_n, std::int64_t t_ns) const {
+    v1::PatchMessage m;
+    m.set_t_ns(t_ns);
+    m.mutable_contact()->set_force_n(force_n);
+    return m;
+  }
   aggregate::Setup setup;
   aggregate::Core core;
   std::map<int, std::uint64_t> seq;
+  std::int64_t tc = kT0;  // the test's clock
 };
 
 TEST_F(CoreTest, StartsInFaultAndHellosAreChecked) {
@@ -245,6 +285,7 @@ TEST_F(CoreTest, AHardContactStopsAndTheLatencyIsMeasured) {
   const auto reset = core.OnReset([] {
     v1::ResetStopRequest r;
     r.set_stop_epoch(1);
+    r.set_aggregator_run_id(kRunId);
     return r;
   }(), true, t);
   ASSERT_TRUE(reset.accepted()) << reset.message();
@@ -278,6 +319,341 @@ TEST_F(CoreTest, AHardContactStopsAndTheLatencyIsMeasured) {
   Send(streams[1], 1, nan, t + 2 * kMs);
   EXPECT_TRUE(std::isfinite(core.SafetyState().cause().force_n()));
   EXPECT_NE(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+}
+
+// Review finding 6: a second hello for a patch with a live, healthy stream is refused DUPLICATE_PATCH before
+// anything else is looked at, whatever it says (here: another spec), and changes nothing: the state stays
+// CLEAR, no epoch, the live link HEALTHY and its stream still served. Old code: the spec check came first,
+// SPEC_MISMATCH and OnHelloRefused set the patch REFUSED (FAULT PATCH_MISSING), and every later heartbeat of
+// the live stream was a kNotConnected rejection with a new epoch each.
+TEST_F(CoreTest, ADuplicateHelloIsRefusedFirstAndChangesNothing) {
+  const auto streams = ClearAll();
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  const std::uint64_t epoch = core.SafetyState().stop_epoch();
+  for (const char* what : {"same", "other spec", "other model", "slow heartbeat"}) {
+    v1::PatchMessage h = Hello(setup, 0);
+    if (std::string(what) == "other spec") h.mutable_hello()->set_patch_fingerprint("deadbeef");
+    if (std::string(what) == "other model") h.mutable_hello()->set_model_sha256("0badf00d");
+    if (std::string(what) == "slow heartbeat") h.mutable_hello()->set_heartbeat_period_ns(50 * kMs);
+    const int impostor = core.OpenStream(tc);
+    const auto r = core.OnPatchMessage(impostor, h, tc);
+    ASSERT_TRUE(r.command && r.command->has_hello_refused()) << what;
+    EXPECT_EQ(r.command->hello_refused().reason(), v1::HELLO_REFUSAL_DUPLICATE_PATCH) << what;
+    EXPECT_TRUE(r.close);
+    EXPECT_EQ(r.end_stream, -1);
+    core.CloseStream(impostor, tc);
+    Beat(streams, 10);
+  }
+  Beat(streams, 500);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  EXPECT_EQ(core.SafetyState().stop_epoch(), epoch);
+  EXPECT_EQ(core.Status(tc).patches(0).link_state(), v1::LINK_STATE_HEALTHY);
+  EXPECT_EQ(core.counters().hellos_refused[v1::HELLO_REFUSAL_DUPLICATE_PATCH], 4u);
+}
+
+// Review finding 10: a hello re-sent on the live stream is checked like the first; a mismatch is a protocol
+// fault of that stream (old code stored it silently: "hello now spec 'another-spec'", HEALTHY, CLEAR).
+TEST_F(CoreTest, AReSentHelloIsCheckedLikeTheFirst) {
+  const auto streams = ClearAll();
+  v1::PatchMessage same = Hello(setup, 1);
+  EXPECT_FALSE(Send(streams[1], 1, same, tc).close);  // the same hello again: fine
+  v1::PatchMessage other = Hello(setup, 1);
+  other.mutable_hello()->set_patch_name("another-spec");
+  other.mutable_hello()->set_model_sha256("0badf00d");
+  const auto r = Send(streams[1], 1, other, tc + kMs);
+  EXPECT_TRUE(r.close);
+  EXPECT_FALSE(r.command);
+  EXPECT_NE(core.last_protocol_error().find("re-sent hello"), std::string::npos) << core.last_protocol_error();
+  EXPECT_EQ(core.counters().bad_input[static_cast<std::size_t>(aggregate::BadInput::kHelloChanged)], 1u);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_FAULT);
+  EXPECT_EQ(core.SafetyState().cause().kind(), v1::SafetyCause::KIND_PATCH_PROTOCOL);
+  EXPECT_EQ(core.SafetyState().cause().patch_id(), "forearm_b");
+  core.CloseStream(streams[1], tc + kMs);  // the service ends the stream (then: silent, a new cause)
+  EXPECT_EQ(core.Status(tc + kMs).patches(1).hello().patch_name(), setup.patches[1].spec_name);  // not stored
+}
+
+// Issue 15 section 2 (review finding 5's core half): a hello for a patch whose stream has been silent for
+// more than 3 watchdogs takes it over; the Core names the old stream for the caller to end. Alive and not
+// silent: still DUPLICATE_PATCH. Old code: DUPLICATE_PATCH for as long as the half-open stream existed.
+TEST_F(CoreTest, ASilentStreamIsTakenOverByANewHello) {
+  const auto streams = ClearAll();
+  const std::int64_t watchdog = setup.safety.patches[2].silence_deadline_ns;  // 30 ms
+  Beat(streams, 90, /*skip=*/2);  // upper_arm_a silent for 90 ms = 3 watchdogs: not yet past
+  const int early = core.OpenStream(tc);
+  const auto r1 = core.OnPatchMessage(early, Hello(setup, 2), tc);
+  ASSERT_TRUE(r1.command && r1.command->has_hello_refused());
+  EXPECT_EQ(r1.command->hello_refused().reason(), v1::HELLO_REFUSAL_DUPLICATE_PATCH);
+  core.CloseStream(early, tc);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_FAULT);  // silent: FAULT already
+  const std::uint64_t epoch = core.SafetyState().stop_epoch();
+  tc += 1;  // silent for 3 x 30 ms + 1 ns: past 3 watchdogs
+  ASSERT_EQ(watchdog, 30 * kMs);
+  const int fresh = core.OpenStream(tc);
+  seq[fresh] = 1;
+  const auto r2 = core.OnPatchMessage(fresh, Hello(setup, 2), tc);
+  ASSERT_TRUE(r2.command && r2.command->has_hello_accepted()) << r2.command->DebugString();
+  EXPECT_EQ(r2.end_stream, streams[2]);
+  EXPECT_EQ(core.counters().takeovers, 1u);
+  EXPECT_EQ(core.SafetyState().stop_epoch(), epoch);  // the silence was the cause; the takeover adds none
+  // The old stream is gone: anything it still says ends it, and changes nothing.
+  const auto old = Heartbeat(streams[2], 2, tc);
+  EXPECT_TRUE(old.close);
+  core.CloseStream(streams[2], tc);
+  // The new stream serves the patch; after 200 ms healthy the FAULT can be reset.
+  std::vector<int> now_streams = streams;
+  now_streams[2] = fresh;
+  Beat(now_streams, 250);
+  EXPECT_EQ(core.Status(tc).patches(2).link_state(), v1::LINK_STATE_HEALTHY);
+  const auto reset = core.OnReset(ResetRequest(core.SafetyState().stop_epoch()), true, tc);
+  EXPECT_TRUE(reset.accepted()) << reset.message();
+  const auto events = core.TakeEvents();
+  bool logged = false;
+  for (const auto& e : events) logged = logged || (e.takeover && e.replaced_stream == streams[2] && e.cause_patch == "upper_arm_a");
+  EXPECT_TRUE(logged);
+}
+
+// Review finding 10 and issue 15 section 3: bad input is a doubt (STOP), named and counted; no NaN published;
+// a contact off the patch does not vanish from the contact set.
+TEST_F(CoreTest, BadContactsAreDoubtsNeverNaNAndNeverVanish) {
+  struct Row {
+    const char* what;
+    std::function<void(v1::PatchMessage&)> edit;
+    aggregate::BadInput bad;
+    const char* doubt;
+  };
+  const std::vector<Row> rows = {
+      {"NaN position", [](v1::PatchMessage& m) { m.mutable_contact()->set_y_mm(std::nanf("")); },
+       aggregate::BadInput::kBadPosition, "bad_position"},
+      {"infinite r", [](v1::PatchMessage& m) { m.mutable_contact()->set_r_deg(INFINITY); },
+       aggregate::BadInput::kBadPosition, "bad_position"},
+      {"y = 5000 mm", [](v1::PatchMessage& m) { m.mutable_contact()->set_y_mm(5000); }, aggregate::BadInput::kBadPosition,
+       "bad_position"},
+      {"r = -10 deg", [](v1::PatchMessage& m) { m.mutable_contact()->set_r_deg(-10); }, aggregate::BadInput::kBadPosition,
+       "bad_position"},
+      {"non-PSD covariance", [](v1::PatchMessage& m) { m.mutable_contact()->set_cov_yr_mm2(10); },
+       aggregate::BadInput::kBadCovariance, "bad_covariance"},
+      {"negative variance", [](v1::PatchMessage& m) { m.mutable_contact()->set_cov_rr_mm2(-1); },
+       aggregate::BadInput::kBadCovariance, "bad_covariance"},
+      {"NaN covariance", [](v1::PatchMessage& m) { m.mutable_contact()->set_cov_yy_mm2(std::nanf("")); },
+       aggregate::BadInput::kBadCovariance, "bad_covariance"},
+      {"frame 1 h ahead", [](v1::PatchMessage& m) { m.set_t_ns(m.t_ns() + 3'600'000 * kMs); },
+       aggregate::BadInput::kImplausibleTime, "implausible_time"},
+      {"frame INT64_MIN", [](v1::PatchMessage& m) { m.set_t_ns(std::numeric_limits<std::int64_t>::min()); },
+       aggregate::BadInput::kImplausibleTime, "implausible_time"},
+  };
+  for (const Row& row : rows) {
+    // A fresh core per row.
+    aggregate::Core c(setup, kT0);
+    std::map<int, std::uint64_t> sq;
+    std::vector<int> st;
+    std::int64_t now = kT0;
+    for (std::size_t i = 0; i < setup.patches.size(); ++i) {
+      st.push_back(c.OpenStream(now));
+      ASSERT_TRUE(c.OnPatchMessage(st.back(), Hello(setup, i), now).command->has_hello_accepted());
+      sq[st.back()] = 1;
+    }
+    auto send = [&](std::size_t i, v1::PatchMessage m) {
+      m.set_patch_id(setup.patches[i].id);
+      m.set_seq(++sq[st[i]]);
+      return c.OnPatchMessage(st[i], m, now);
+    };
+    for (int k = 0; k < 30; ++k) {
+      now += 10 * kMs;
+      c.OnJointState(Joints(now, 0.1), now);
+      for (std::size_t i = 0; i < st.size(); ++i) {
+        v1::PatchMessage hb;
+        hb.mutable_heartbeat()->set_healthy(true);
+        send(i, hb);
+      }
+    }
+    ASSERT_TRUE(c.OnReset(ResetRequest(1), true, now).accepted()) << row.what;
+    // A light (1.0 N, below 1.5 N) located contact, made bad by the row.
+    v1::PatchMessage m = ContactMsg(1.0f, now - kMs);
+    auto* pc = m.mutable_contact();
+    pc->set_located(true);
+    pc->set_y_mm(60);
+    pc->set_r_deg(30);
+    pc->set_cov_yy_mm2(4);
+    pc->set_cov_rr_mm2(4);
+    pc->set_onset(true);
+    row.edit(m);
+    EXPECT_FALSE(send(0, m).close) << row.what;
+    const v1::SafetyState s = c.SafetyState();
+    EXPECT_EQ(s.state(), v1::SafetyState::STATE_STOP) << row.what;
+    EXPECT_EQ(s.cause().kind(), v1::SafetyCause::KIND_CONTACT) << row.what;
+    EXPECT_EQ(s.cause().patch_id(), "forearm_a") << row.what;
+    EXPECT_FALSE(s.cause().has_p_bc_m()) << row.what;  // never a NaN (or an off-patch) position
+    EXPECT_EQ(s.cause().message().find("nan"), std::string::npos) << row.what << ": " << s.cause().message();
+    EXPECT_NE(s.cause().message().find(row.doubt), std::string::npos) << row.what << ": " << s.cause().message();
+    EXPECT_LE(s.cause().t_ns(), now) << row.what;  // evidence time never from a wild clock
+    EXPECT_EQ(c.counters().bad_input[static_cast<std::size_t>(row.bad)], 1u) << row.what;
+    // Still in the contact set (at the patch, unplaced), finite.
+    const v1::ContactSet set = c.Contacts(now);
+    ASSERT_EQ(set.contacts_size(), 1) << row.what;
+    EXPECT_EQ(set.contacts(0).patch_ids(0), "forearm_a") << row.what;
+    EXPECT_FALSE(set.contacts(0).located()) << row.what;
+    EXPECT_TRUE(std::isfinite(set.contacts(0).p_bc_m().x()) && std::isfinite(set.contacts(0).force_n())) << row.what;
+    EXPECT_GE(c.TakeStopLatencyNs(), 0) << row.what;
+  }
+}
+
+// Review finding 10: an active_fault outside the contract's enum (negative too) is a fault, counted (old code
+// clamped -3 to 0, "no fault": HEALTHY and CLEAR). A released frame of -0.0004 N is noise: no STOP.
+TEST_F(CoreTest, UnknownFaultCodesFaultAndNoiseBelowZeroDoesNotStop) {
+  const auto streams = ClearAll();
+  v1::PatchMessage touch = ContactMsg(0.4f, tc);
+  touch.mutable_contact()->set_onset(true);
+  Send(streams[0], 0, touch, tc);
+  v1::PatchMessage release = ContactMsg(-0.0004f, tc + kMs);
+  release.mutable_contact()->set_released(true);
+  Send(streams[0], 0, release, tc + kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  for (int code : {-3, 99, 12}) {
+    v1::PatchMessage hb;
+    hb.mutable_heartbeat()->set_healthy(true);
+    hb.mutable_heartbeat()->set_active_fault(static_cast<v1::PatchFaultCode>(code));
+    Send(streams[1], 1, hb, tc + 2 * kMs);
+    EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_FAULT) << code;
+    EXPECT_EQ(core.SafetyState().cause().kind(), v1::SafetyCause::KIND_PATCH_FAULT) << code;
+    EXPECT_EQ(core.SafetyState().cause().patch_fault(), v1::PATCH_FAULT_CODE_INTERNAL) << code;
+    EXPECT_EQ(core.Status(tc + 2 * kMs).patches(1).link_state(), v1::LINK_STATE_UNHEALTHY) << code;
+  }
+  EXPECT_EQ(core.counters().bad_input[static_cast<std::size_t>(aggregate::BadInput::kUnknownFaultCode)], 3u);
+  v1::PatchMessage f;
+  f.mutable_fault()->set_code(static_cast<v1::PatchFaultCode>(-7));
+  Send(streams[2], 2, f, tc + 3 * kMs);
+  EXPECT_EQ(core.counters().bad_input[static_cast<std::size_t>(aggregate::BadInput::kUnknownFaultCode)], 4u);
+}
+
+// Review finding 10 / 12: a joint state stamped INT64_MAX (or far from arrival) is refused and counted, and
+// cannot become the monotonic reference (old code: accepted, then every later state not_monotonic: FAULT until
+// restart, joint_state_age_ns -7427876283578196409). The reference is per stream.
+TEST_F(CoreTest, AWildJointStampIsRefusedAndCannotLockTheAggregator) {
+  const auto streams = ClearAll();
+  EXPECT_EQ(core.OnJointState(Joints(std::numeric_limits<std::int64_t>::max(), 0.1), tc),
+            aggregate::JointRejection::kImplausibleTime);
+  EXPECT_EQ(core.OnJointState(Joints(tc - 3'000 * kMs, 0.1), tc), aggregate::JointRejection::kImplausibleTime);
+  EXPECT_EQ(core.counters().joint_states[static_cast<std::size_t>(aggregate::JointRejection::kImplausibleTime)], 2u);
+  Beat(streams, 100);  // later states, on time, are accepted
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  const auto st = core.Status(tc);
+  EXPECT_GE(st.joint_state_age_ns(), 0);
+  EXPECT_LT(st.joint_state_age_ns(), 10 * kMs);
+  // Per stream: stream 7 a second ahead (plausible), then a reconnected controller (stream 8) on time.
+  EXPECT_EQ(core.OnJointState(Joints(tc + 1'000 * kMs, 0.1), tc, 7), aggregate::JointRejection::kNone);
+  EXPECT_EQ(core.OnJointState(Joints(tc + 5 * kMs, 0.1), tc + 5 * kMs, 7), aggregate::JointRejection::kNotMonotonic);
+  EXPECT_EQ(core.OnJointState(Joints(tc + 5 * kMs, 0.1), tc + 5 * kMs, 8), aggregate::JointRejection::kNone);
+  core.CloseJointStream(7);
+  EXPECT_EQ(core.OnJointState(Joints(tc + 6 * kMs, 0.1), tc + 6 * kMs, 7), aggregate::JointRejection::kNone);
+  // The age is by arrival on the aggregator's clock: never negative even with a future stamp.
+  EXPECT_EQ(core.Status(tc + 6 * kMs).joint_state_age_ns(), 0);
+}
+
+TEST_F(CoreTest, NoJointStateYetIsAgeMinusOne) { EXPECT_EQ(core.Status(kT0).joint_state_age_ns(), -1); }
+
+// Finding 4 (core half): every SafetyState, AggregatorStatus and HelloAccepted carries the run id and the robot
+// name; a ResetStop naming another run, or none, is refused WRONG_RUN and changes nothing else.
+TEST_F(CoreTest, RunIdentityIsPublishedAndResetsAreBoundToTheRun) {
+  const int s0 = core.OpenStream(tc);
+  const auto hello = core.OnPatchMessage(s0, Hello(setup, 0), tc);
+  ASSERT_TRUE(hello.command && hello.command->has_hello_accepted());
+  EXPECT_EQ(hello.command->hello_accepted().aggregator_run_id(), kRunId);
+  EXPECT_EQ(hello.command->hello_accepted().robot_name(), "cobot");
+  EXPECT_EQ(core.SafetyState().aggregator_run_id(), kRunId);
+  EXPECT_EQ(core.SafetyState().robot_name(), "cobot");
+  EXPECT_EQ(core.Status(tc).aggregator_run_id(), kRunId);
+  EXPECT_EQ(core.Status(tc).robot_name(), "cobot");
+  core.CloseStream(s0, tc);
+  (void)core.TakeEvents();
+  const auto streams = ClearAll();
+  v1::PatchMessage hard = ContactMsg(1.8f, tc);
+  Send(streams[0], 0, hard, tc);
+  v1::PatchMessage rel = ContactMsg(0.0f, tc);
+  rel.mutable_contact()->set_released(true);
+  Send(streams[0], 0, rel, tc);
+  Beat(streams, 10);
+  const v1::SafetyState before = core.SafetyState();
+  ASSERT_EQ(before.state(), v1::SafetyState::STATE_STOP);
+  for (std::uint64_t run : {std::uint64_t{0}, kRunId + 1}) {
+    const auto r = core.OnReset(ResetRequest(before.stop_epoch(), run), true, tc);
+    EXPECT_FALSE(r.accepted());
+    EXPECT_EQ(r.reason(), v1::RESET_REFUSAL_WRONG_RUN);
+    EXPECT_EQ(core.SafetyState().SerializeAsString(), before.SerializeAsString());
+  }
+  const auto ok = core.OnReset(ResetRequest(before.stop_epoch()), true, tc);
+  EXPECT_TRUE(ok.accepted()) << ok.message();
+  // The reset events name the operator.
+  const auto events = core.TakeEvents();
+  int refused = 0, accepted = 0;
+  for (const auto& e : events) {
+    if (e.safety.type == safety::EventType::kResetRefused && e.safety.reset_refusal == safety::ResetRefusal::kWrongRun) {
+      ++refused;
+      EXPECT_EQ(e.operator_name, "alice");
+    }
+    if (e.safety.type == safety::EventType::kResetAccepted) ++accepted;
+  }
+  EXPECT_EQ(refused, 2);
+  EXPECT_EQ(accepted, 2);  // ClearAll's start-up reset and this one
+  auto zero = setup;
+  zero.run_id = 0;
+  EXPECT_THROW(aggregate::Core(zero, kT0), InputError);
+}
+
+// Finding 11: ContactSet.t_ns is the newest contributing frame's interrogator time, 0 when empty (old code:
+// the publication time); CONFIG_MISMATCH and the rate are checked at hello when the scene states them.
+TEST_F(CoreTest, ContactSetTimeAndHelloExpectations) {
+  const auto streams = ClearAll();
+  EXPECT_EQ(core.Contacts(tc).t_ns(), 0);
+  v1::PatchMessage a = ContactMsg(0.5f, tc - 3 * kMs);
+  a.mutable_contact()->set_onset(true);
+  Send(streams[0], 0, a, tc);
+  v1::PatchMessage b = ContactMsg(0.6f, tc - 2 * kMs);
+  b.mutable_contact()->set_onset(true);
+  Send(streams[2], 2, b, tc);
+  EXPECT_EQ(core.Contacts(tc + 5 * kMs).t_ns(), tc - 2 * kMs);
+  EXPECT_EQ(core.Contacts(tc + 5 * kMs).published_t_ns(), tc + 5 * kMs);
+
+  auto pinned = CobotSetup();
+  pinned.safety.input.sample_rate_hz = 1000;
+  pinned.safety.input.decoder_config_sha256 = std::string(64, 'a');
+  aggregate::Core c(pinned, kT0);
+  auto hello = [&](double rate, const std::string& sha) {
+    v1::PatchMessage m = Hello(pinned, 0);
+    m.mutable_hello()->set_sample_rate_hz(rate);
+    m.mutable_hello()->mutable_decoder_config()->set_config_sha256(sha);
+    const int s = c.OpenStream(kT0);
+    const auto r = c.OnPatchMessage(s, m, kT0);
+    c.CloseStream(s, kT0);
+    return r.command->has_hello_accepted() ? v1::HELLO_REFUSAL_UNSPECIFIED : r.command->hello_refused().reason();
+  };
+  EXPECT_EQ(hello(500, std::string(64, 'a')), v1::HELLO_REFUSAL_RATE_MISMATCH);
+  EXPECT_EQ(hello(std::nan(""), std::string(64, 'a')), v1::HELLO_REFUSAL_RATE_MISMATCH);
+  EXPECT_EQ(hello(1000, std::string(64, 'b')), v1::HELLO_REFUSAL_CONFIG_MISMATCH);
+  EXPECT_EQ(hello(1000.2, std::string(64, 'a')), v1::HELLO_REFUSAL_UNSPECIFIED);
+}
+
+// Issue 15 section 2 through the Core: a contact hovering at the threshold for 0.75 s (frames at 1 kHz,
+// crossing every 25 ms) opens one epoch with the scene's release settings (old code: 30).
+TEST_F(CoreTest, AContactHoveringAtTheThresholdOpensOneEpoch) {
+  const auto streams = ClearAll();
+  const std::uint64_t epoch = core.SafetyState().stop_epoch();
+  for (int k = 0; k < 750; ++k) {
+    tc += kMs;
+    v1::PatchMessage m = ContactMsg((k / 25) % 2 == 0 ? 1.52f : 1.48f, tc);
+    m.mutable_contact()->set_onset(k == 0);
+    Send(streams[0], 0, m, tc);
+    if (k % 10 == 0) {
+      core.OnJointState(Joints(tc, 0.1), tc);
+      for (std::size_t i = 0; i < streams.size(); ++i) {
+        v1::PatchMessage hb;
+        hb.mutable_heartbeat()->set_healthy(true);
+        hb.mutable_heartbeat()->set_in_contact(i == 0);
+        Send(streams[i], i, hb, tc);
+      }
+    }
+  }
+  EXPECT_EQ(core.SafetyState().stop_epoch(), epoch + 1);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
 }
 
 TEST(CoreSetup, InconsistentSetupsAreRefused) {

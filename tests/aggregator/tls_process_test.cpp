@@ -104,6 +104,8 @@ v1::ResetStopResponse Reset(v1::Aggregator::Stub& stub, std::uint64_t epoch, grp
   ctx.set_deadline(std::chrono::system_clock::now() + 3s);
   v1::ResetStopRequest r;
   r.set_stop_epoch(epoch);
+  v1::AggregatorStatus st;
+  if (Status(stub, &st).ok()) r.set_aggregator_run_id(st.aggregator_run_id());  // the run whose epoch this is
   r.set_operator_name("tls_process_test");
   v1::ResetStopResponse resp;
   *status = stub.ResetStop(&ctx, r, &resp);

@@ -418,14 +418,53 @@ const std::vector<Rule>& Rules() {
          w.Reset(2);
        },
        {kStop, 2, kContact, "forearm", Rj::kNonFiniteForce, RR::kCausePresent, kContact, "forearm"}},
-      {"a_good_frame_below_threshold_ends_the_doubt",
+      {"a_good_frame_below_the_release_level_ends_the_doubt_after_the_hold",
        [](World& w) {
          w.Clear();
          w.Contact("forearm", kNaN);
          w.Contact("forearm", 3.0f);
+         w.touching = {"forearm"};  // heartbeats keep the link and the contact (in_contact)
+         w.Beat(100);               // ContactRelease.hold_ns (default 100 ms)
          w.Reset(2);
        },
        {kClear, 2, kNone, {}, Rj::kNone, RR::kNone}},
+      {"a_good_frame_below_threshold_does_not_end_the_doubt_before_the_hold",
+       [](World& w) {
+         w.Clear();
+         w.Contact("forearm", kNaN);
+         w.Contact("forearm", 3.0f);
+         w.touching = {"forearm"};
+         w.Beat(90);
+         w.Reset(2);
+       },
+       {kStop, 2, kContact, "forearm", Rj::kNone, RR::kCausePresent, kContact, "forearm"}},
+      {"a_slightly_negative_force_is_noise_judged_as_zero",  // -0.0004 N released frame: no STOP (review 10)
+       [](World& w) {
+         w.Clear();
+         w.Contact("forearm", 0.5f);
+         w.Contact("forearm", -0.0004f, {}, true);
+       },
+       {kClear, 1}},
+      {"a_force_below_the_negative_tolerance_stops",
+       [](World& w) {
+         w.Clear();
+         w.Contact("forearm", -0.06f, {}, true);  // beyond the default 0.05 N tolerance
+       },
+       {kStop, 2, kContact, "forearm", Rj::kNegativeForce}},
+      {"a_doubt_found_by_the_caller_stops",
+       [](World& w) {
+         w.Clear();
+         w.last = w.policy.OnContact(w.data, "forearm", {.force_n = 1.0f, .doubt = Rejection::kBadPosition}, w.t);
+       },
+       {kStop, 2, kContact, "forearm", Rj::kBadPosition}},
+      {"a_reset_naming_another_run_is_refused",
+       [](World& w) {
+         w.Clear();
+         w.Contact("forearm", 200.0f);
+         w.Contact("forearm", 0.0f, {}, true);
+         w.reset = w.policy.Reset(w.data, {.stop_epoch = 2, .authorized = true, .other_run = true}, w.t);
+       },
+       {kStop, 2, kContact, "forearm", Rj::kNone, RR::kWrongRun}},
       {"unknown_region_stops",
        [](World& w) {
          w.Clear();
@@ -669,7 +708,8 @@ TEST(SafetyCounters, CountStopsFaultsRefusalsAndRejections) {
   EXPECT_EQ(n.resets_refused[static_cast<std::size_t>(ResetRefusal::kWrongEpoch)], 1u);
   EXPECT_EQ(n.rejections[static_cast<std::size_t>(Rejection::kNonFiniteForce)], 1u);
   EXPECT_EQ(n.rejections[static_cast<std::size_t>(Rejection::kUnknownPatch)], 1u);
-  EXPECT_EQ(n.causes_while_latched, 2u);  // the NaN doubt and the unknown patch (forearm's contact was present)
+  // The unknown patch. The NaN doubt on forearm, whose contact was already held, is the same cause.
+  EXPECT_EQ(n.causes_while_latched, 1u);
 }
 
 TEST(SafetyPatches, LinkStatesFollowTheEvents) {
@@ -753,6 +793,145 @@ TEST(SafetyNames, AreDistinctSnakeCase) {
   ExpectDistinctNames<PatchFaultCode>(kPatchFaultCodeCount, &PatchFaultCodeName);
   ExpectDistinctNames<Rejection>(kRejectionCount, &RejectionName);
   EXPECT_EQ(StateName(State::kStop), "stop");
+}
+
+}  // namespace
+}  // namespace ruffini::safety
+
+namespace ruffini::safety {
+namespace {
+
+// Review finding 6 / issue 15 section 2: a contact hovering at its threshold (frames at 1 kHz, crossing it
+// every 25 ms for 0.75 s: 30 crossings) is one cause, one epoch. Before the release hysteresis every crossing
+// above was a new cause, and with new_epoch_per_cause (the default) a new epoch: 30 epochs.
+TEST(SafetyHysteresis, AContactHoveringAtTheThresholdOpensOneEpoch) {
+  Config c = TwoPatchScene();
+  c.new_epoch_per_cause = true;
+  testing::World w(c);
+  w.Clear();
+  const std::uint64_t epoch0 = w.epoch();
+  for (int k = 0; k < 750; ++k) {
+    w.Wait(1);
+    const bool above = (k / 25) % 2 == 0;
+    w.Contact("forearm", above ? 160.3f : 159.8f);
+    if (k % 10 == 0) w.last = w.policy.OnHeartbeat(w.data, "upper_arm", {.healthy = true}, w.t);
+    if (k % 10 == 0) w.last = w.policy.OnJointState(w.data, w.t);
+  }
+  EXPECT_EQ(w.epoch(), epoch0 + 1);
+  EXPECT_EQ(w.data.counters().causes[static_cast<std::size_t>(CauseKind::kContact)], 1u);
+  EXPECT_EQ(w.state(), State::kStop);
+}
+
+TEST(SafetyHysteresis, TheCauseEndsOnlyAfterTheForceStayedBelowTheReleaseLevelForTheHold) {
+  Config c = TwoPatchScene();
+  c.new_epoch_per_cause = true;
+  c.regions[0].release = {.fraction = 0.1f, .hold_ns = 50 * kMs, .source = "test"};  // forearm: below 144 N
+  testing::World w(c);
+  w.Clear();
+  w.touching = {"forearm"};
+  w.Contact("forearm", 170.0f);
+  ASSERT_EQ(w.epoch(), 2u);
+  auto present = [&] {
+    w.Reset(w.epoch());
+    return w.reset.reason == ResetRefusal::kCausePresent && w.reset.blocking.kind == CauseKind::kContact;
+  };
+  // Between the release level (144 N) and the threshold: held, however long.
+  for (int k = 0; k < 30; ++k) {
+    w.Beat(10);
+    w.Contact("forearm", 150.0f);
+  }
+  EXPECT_TRUE(present());
+  // Below the release level for 40 ms, then above the threshold again: the same cause, no new epoch.
+  w.Contact("forearm", 100.0f);
+  w.Beat(40);
+  w.Contact("forearm", 100.0f);
+  EXPECT_TRUE(present());
+  w.Contact("forearm", 165.0f);
+  EXPECT_EQ(w.epoch(), 2u);
+  // Below the release level for the full 50 ms: the cause is over (without another frame), and a reset clears.
+  w.Contact("forearm", 100.0f);
+  w.Beat(40);
+  EXPECT_TRUE(present());
+  w.Beat(10);
+  w.Reset(w.epoch());
+  EXPECT_TRUE(w.reset.accepted) << Describe(w.policy, w.reset);
+  // Cleared: the next frame above the threshold is a new STOP at once (hysteresis never delays a stop).
+  w.Contact("forearm", 160.5f);
+  EXPECT_EQ(w.state(), State::kStop);
+  EXPECT_EQ(w.epoch(), 3u);
+}
+
+TEST(SafetyHysteresis, ReleaseSettingsAreValidated) {
+  Config c = TwoPatchScene();
+  c.regions[1].release.fraction = 1.0f;
+  EXPECT_THROW(Policy{c}, InputError);
+  c = TwoPatchScene();
+  c.regions[1].release.hold_ns = -1;
+  EXPECT_THROW(Policy{c}, InputError);
+  c = TwoPatchScene();
+  c.input.negative_force_tolerance_n = -0.1f;
+  EXPECT_THROW(Policy{c}, InputError);
+  c = TwoPatchScene();
+  c.input.max_time_skew_ns = 0;
+  EXPECT_THROW(Policy{c}, InputError);
+}
+
+// The same rejection again is the same cause: a stream of refused heartbeats (an unknown patch here) takes
+// one epoch, not one each (before: one epoch per heartbeat with new_epoch_per_cause).
+TEST(SafetyRejections, TheSameRejectionAgainTakesNoNewEpoch) {
+  Config c = TwoPatchScene();
+  c.new_epoch_per_cause = true;
+  testing::World w(c);
+  w.Clear();
+  for (int k = 0; k < 100; ++k) {
+    w.Beat(10);  // the scene's patches stay healthy
+    w.last = w.policy.OnHeartbeat(w.data, "tail", {.healthy = true}, w.t);
+    EXPECT_EQ(w.last.rejection, Rejection::kUnknownPatch);
+  }
+  EXPECT_EQ(w.epoch(), 2u);
+  EXPECT_EQ(w.data.counters().rejections[static_cast<std::size_t>(Rejection::kUnknownPatch)], 100u);
+  // Another kind of rejection is a new cause.
+  w.Contact("forearm", kNaN);
+  EXPECT_EQ(w.epoch(), 3u);
+}
+
+// Every latch, escalation, new epoch, shutdown and reset is recorded once for the caller's log.
+TEST(SafetyEvents, LatchesEscalationsAndResetsAreRecorded) {
+  Config c = TwoPatchScene();
+  c.new_epoch_per_cause = true;
+  testing::World w(c);
+  w.Clear();
+  ASSERT_EQ(w.data.events().size(), 1u);  // the start-up reset (the start-up latch is the Data's initial state)
+  EXPECT_EQ(w.data.events()[0].type, EventType::kResetAccepted);
+  EXPECT_EQ(w.data.events()[0].reset_epoch, 1u);
+  w.data.ClearEvents();
+  w.Contact("forearm", 200.0f);
+  w.Contact("forearm", 201.0f);  // held: nothing new
+  w.last = w.policy.OnPatchFault(w.data, "upper_arm", PatchFaultCode::kFramesLost, w.t);
+  w.Contact("upper_arm", 180.0f);
+  w.Reset(2);
+  (void)w.policy.Shutdown(w.data, w.t);
+  const auto ev = w.data.events();
+  ASSERT_EQ(ev.size(), 5u);
+  EXPECT_EQ(ev[0].type, EventType::kLatch);
+  EXPECT_EQ(ev[0].stop_epoch, 2u);
+  EXPECT_EQ(ev[0].cause.kind, CauseKind::kContact);
+  EXPECT_EQ(ev[0].cause.patch, 0);
+  EXPECT_FLOAT_EQ(ev[0].cause.force_n, 200.0f);
+  EXPECT_EQ(ev[1].type, EventType::kEscalation);
+  EXPECT_EQ(ev[1].state, State::kFault);
+  EXPECT_EQ(ev[1].stop_epoch, 3u);
+  EXPECT_EQ(ev[2].type, EventType::kNewEpoch);
+  EXPECT_EQ(ev[2].stop_epoch, 4u);
+  EXPECT_EQ(ev[3].type, EventType::kResetRefused);
+  EXPECT_EQ(ev[3].reset_refusal, ResetRefusal::kWrongEpoch);
+  EXPECT_EQ(ev[3].reset_epoch, 2u);
+  EXPECT_EQ(ev[4].type, EventType::kShutdown);
+  EXPECT_EQ(EventTypeName(EventType::kNewEpoch), "new_epoch");
+  // Full: the oldest are dropped and counted, the newest kept.
+  for (int k = 0; k < 20; ++k) w.Reset(1);
+  EXPECT_EQ(w.data.events().size(), kEventCapacity);
+  EXPECT_EQ(w.data.counters().events_dropped, 5u + 20u - kEventCapacity);
 }
 
 }  // namespace

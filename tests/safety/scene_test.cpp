@@ -43,6 +43,17 @@ TEST(CobotScene, SafetySection) {
   EXPECT_EQ(c.joint_state_max_age_ns, 50 * kMsNs);
   EXPECT_EQ(c.healthy_before_reset_ns, 200 * kMsNs);
   EXPECT_TRUE(c.new_epoch_per_cause);  // the default: the contract's one epoch per cause
+  for (const RegionConfig& r : c.regions) {
+    EXPECT_FLOAT_EQ(r.release.fraction, 0.1f) << r.name;
+    EXPECT_EQ(r.release.hold_ns, 100 * kMsNs) << r.name;
+    EXPECT_THAT(r.release.source, HasSubstr("35 mN")) << r.name;
+  }
+  EXPECT_FLOAT_EQ(c.input.negative_force_tolerance_n, 0.05f);
+  EXPECT_EQ(c.input.max_time_skew_ns, 2000 * kMsNs);
+  EXPECT_EQ(c.input.position_tolerance_y_mm, 5.0);
+  EXPECT_EQ(c.input.position_tolerance_r_deg, 5.0);
+  EXPECT_EQ(c.input.sample_rate_hz, 0.0);  // the cobot scene pins no rate: ruffini demo --rate-hz may vary it
+  EXPECT_THAT(c.input.source, HasSubstr("time_skew: "));
   // The policy takes it as it is.
   const Policy policy(c);
   EXPECT_EQ(policy.patch_count(), 4u);
@@ -155,6 +166,49 @@ TEST_F(SafetyScene, BadDeadlinesAndKeys) {
                             "section, so no joint states");
   p = Write("arm", "arm", kArm, "  threshold_n: 5\n");
   EXPECT_EQ(Message(p), p + ":12:3: 'safety.threshold_n' is not a known key here");
+}
+
+TEST_F(SafetyScene, ContactReleaseAndInputLimits) {
+  const Config c = ConfigFromScene(Write(
+      "arm", "arm",
+      std::string(kArm) + "    - {name: hand, threshold_n: 3, source: y, release: {fraction: 0.2, hold_ms: 30, source: z}}\n",
+      "  contact_release: {fraction: 0.05, hold_ms: 250, source: r}\n"
+      "  negative_force_tolerance: {force_n: 0.01, source: n}\n"
+      "  time_skew: {max_ms: 500, source: t}\n"
+      "  position_tolerance: {y_mm: 2, r_deg: 1, source: p}\n"
+      "  decoders: {sample_rate_hz: 1000, config_sha256: " + std::string(64, 'a') + ", source: d}\n"));
+  EXPECT_FLOAT_EQ(c.regions[0].release.fraction, 0.05f);  // the section's
+  EXPECT_EQ(c.regions[0].release.hold_ns, 250 * kMsNs);
+  EXPECT_EQ(c.regions[0].release.source, "r");
+  EXPECT_FLOAT_EQ(c.regions[1].release.fraction, 0.2f);   // the region's own
+  EXPECT_EQ(c.regions[1].release.hold_ns, 30 * kMsNs);
+  EXPECT_FLOAT_EQ(c.input.negative_force_tolerance_n, 0.01f);
+  EXPECT_EQ(c.input.max_time_skew_ns, 500 * kMsNs);
+  EXPECT_EQ(c.input.position_tolerance_y_mm, 2.0);
+  EXPECT_EQ(c.input.position_tolerance_r_deg, 1.0);
+  EXPECT_EQ(c.input.sample_rate_hz, 1000.0);
+  EXPECT_EQ(c.input.decoder_config_sha256, std::string(64, 'a'));
+  EXPECT_EQ(c.input.source, "negative_force_tolerance: n; time_skew: t; position_tolerance: p; decoders: d");
+  // Defaults when absent.
+  const Config d = ConfigFromScene(Write("arm", "arm", kArm));
+  EXPECT_FLOAT_EQ(d.regions[0].release.fraction, ContactRelease{}.fraction);
+  EXPECT_EQ(d.input.max_time_skew_ns, InputLimits{}.max_time_skew_ns);
+}
+
+TEST_F(SafetyScene, ContactReleaseAndInputLimitsAreValidated) {
+  std::string p = Write("arm", "arm", kArm, "  contact_release: {fraction: 0.1, hold_ms: 100}\n");
+  EXPECT_EQ(Message(p), p + ":12:20: 'safety.contact_release.source' is missing: say why this release level and "
+                            "hold time (a number carries where it comes from)");
+  p = Write("arm", "arm", kArm, "  contact_release: {fraction: 1, source: x}\n");
+  EXPECT_EQ(Message(p), p + ":12:21: 'safety.contact_release.fraction' (1) must lie inside 0..0.9");
+  p = Write("arm", "arm", kArm, "  time_skew: {max_ms: 0, source: x}\n");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.time_skew.max_ms' (0) must lie inside"));
+  p = Write("arm", "arm", kArm, "  negative_force_tolerance: {force_n: 0.05}\n");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.negative_force_tolerance.source' is missing"));
+  p = Write("arm", "arm", kArm, "  decoders: {config_sha256: ABC, source: x}\n");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.decoders.config_sha256' (ABC) must be a SHA-256 in lower-case hex"));
+  p = Write("arm", "arm", "    - {name: arm, threshold_n: 2, source: x, release: {hold_ms: 5, source: x, extra: 1}}\n");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.regions[0].release.extra' is not a known key here"));
 }
 
 TEST_F(SafetyScene, RegionAndSafetyGoTogether) {

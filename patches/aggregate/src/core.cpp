@@ -15,6 +15,18 @@ std::string_view JointRejectionName(JointRejection r) noexcept {
     case JointRejection::kWrongNames: return "wrong_names";
     case JointRejection::kNotFinite: return "not_finite";
     case JointRejection::kNotMonotonic: return "not_monotonic";
+    case JointRejection::kImplausibleTime: return "implausible_time";
+  }
+  return "unknown";
+}
+
+std::string_view BadInputName(BadInput b) noexcept {
+  switch (b) {
+    case BadInput::kBadPosition: return "bad_position";
+    case BadInput::kBadCovariance: return "bad_covariance";
+    case BadInput::kImplausibleTime: return "implausible_time";
+    case BadInput::kUnknownFaultCode: return "unknown_fault_code";
+    case BadInput::kHelloChanged: return "hello_changed";
   }
   return "unknown";
 }
@@ -28,6 +40,19 @@ v1::SafetyState::State ToProto(safety::State s) {
     case safety::State::kFault: return v1::SafetyState::STATE_FAULT;
   }
   return v1::SafetyState::STATE_UNSPECIFIED;
+}
+
+// |a - b| > bound, without overflow for any pair of int64 values.
+bool FarApart(std::int64_t a, std::int64_t b, std::int64_t bound) {
+  std::int64_t d = 0;
+  if (__builtin_sub_overflow(a, b, &d)) return true;  // further apart than any int64 bound
+  return d > bound || d < -bound;
+}
+
+// A code on the wire (any int32, negative too) -> the policy's enum; nullopt when outside it.
+std::optional<safety::PatchFaultCode> FaultCode(int code) {
+  if (code < 0 || code >= static_cast<int>(safety::kPatchFaultCodeCount)) return std::nullopt;
+  return static_cast<safety::PatchFaultCode>(code);
 }
 
 }  // namespace
@@ -48,6 +73,7 @@ Core::Core(Setup setup, std::int64_t now_ns)
       robot::ValidateMount(*setup_.robot, *setup_.patches[i].mount, "patch '" + setup_.patches[i].id + "'");
     }
   }
+  if (setup_.run_id == 0) throw InputError("aggregator setup: the run id must be nonzero (drawn at start)");
   links_.resize(setup_.patches.size());
   if (setup_.robot) {
     q_scratch_.resize(setup_.robot->num_dof());
@@ -71,7 +97,26 @@ v1::AggregatorCommand Core::Command(std::int64_t now_ns) {
   return c;
 }
 
+void Core::DrainPolicyEvents(const std::string& operator_name) {
+  for (const safety::Event& e : data_.events()) {
+    Event out;
+    out.safety = e;
+    out.cause_patch = std::string(policy_.patch_id(e.cause.patch));
+    if (e.type == safety::EventType::kResetAccepted || e.type == safety::EventType::kResetRefused) {
+      out.operator_name = operator_name;
+    }
+    events_.push_back(std::move(out));
+  }
+  data_.ClearEvents();
+}
+
+std::vector<Event> Core::TakeEvents() {
+  DrainPolicyEvents();
+  return std::exchange(events_, {});
+}
+
 void Core::Note(const safety::Step& step) {
+  if (!data_.events().empty()) DrainPolicyEvents();
   if (!step.publish) return;
   changed_ = true;
   const auto& s = data_.state();
@@ -110,6 +155,63 @@ Core::Reply Core::ProtocolError(int /*stream*/, Stream& s, const std::string& wh
   return r;
 }
 
+v1::HelloRefusal Core::CheckHello(std::size_t patch, const v1::PatchHello& h, std::string& message) const {
+  const PatchExpectation& want = setup_.patches[patch];
+  const std::string& id = want.id;
+  if (h.patch_name() != want.spec_name || h.patch_fingerprint() != want.spec_fingerprint ||
+      h.model_patch_fingerprint() != want.spec_fingerprint) {
+    message = "patch '" + id + "': expected spec '" + want.spec_name + "' (" + want.spec_fingerprint +
+              "), the decoder has '" + h.patch_name() + "' (" + h.patch_fingerprint() + ", model trained for " +
+              h.model_patch_fingerprint() + ")";
+    return v1::HELLO_REFUSAL_SPEC_MISMATCH;
+  }
+  if (!want.model_sha256.empty() && h.model_sha256() != want.model_sha256) {
+    message = "patch '" + id + "': expected model sha256 " + want.model_sha256 + ", the decoder runs " +
+              h.model_name() + " (" + h.model_sha256() + ")";
+    return v1::HELLO_REFUSAL_MODEL_MISMATCH;
+  }
+  if (h.heartbeat_period_ns() <= 0 || h.heartbeat_period_ns() > setup_.max_heartbeat_period_ns) {
+    message = "heartbeat period " + std::to_string(h.heartbeat_period_ns()) + " ns; at most " +
+              std::to_string(setup_.max_heartbeat_period_ns) + " ns";
+    return v1::HELLO_REFUSAL_RATE_MISMATCH;
+  }
+  const safety::InputLimits& in = setup_.safety.input;
+  if (in.sample_rate_hz > 0 &&
+      !(std::isfinite(h.sample_rate_hz()) && std::abs(h.sample_rate_hz() - in.sample_rate_hz) <= 1e-3 * in.sample_rate_hz)) {
+    message = "patch '" + id + "': sample rate " + std::to_string(h.sample_rate_hz()) + " Hz; the scene expects " +
+              std::to_string(in.sample_rate_hz) + " Hz";
+    return v1::HELLO_REFUSAL_RATE_MISMATCH;
+  }
+  if (!in.decoder_config_sha256.empty() && h.decoder_config().config_sha256() != in.decoder_config_sha256) {
+    message = "patch '" + id + "': decoder configuration " + h.decoder_config().config_sha256() +
+              "; the scene expects " + in.decoder_config_sha256;
+    return v1::HELLO_REFUSAL_CONFIG_MISMATCH;
+  }
+  return v1::HELLO_REFUSAL_UNSPECIFIED;
+}
+
+safety::Rejection Core::CheckContact(std::size_t patch, const v1::PatchMessage& m, std::int64_t now_ns) const {
+  const safety::InputLimits& in = setup_.safety.input;
+  if (m.t_ns() != 0 && FarApart(m.t_ns(), now_ns, in.max_time_skew_ns)) return safety::Rejection::kImplausibleTime;
+  const v1::PatchContact& c = m.contact();
+  if (!c.located()) return safety::Rejection::kNone;
+  const PatchExpectation& want = setup_.patches[patch];
+  const double y = c.y_mm(), r = c.r_deg();
+  if (!std::isfinite(y) || !std::isfinite(r) || y < -in.position_tolerance_y_mm ||
+      y > want.extent_y_mm + in.position_tolerance_y_mm || r < -in.position_tolerance_r_deg ||
+      r > want.extent_r_deg + in.position_tolerance_r_deg) {
+    return safety::Rejection::kBadPosition;
+  }
+  // A 2x2 covariance is PSD when both variances are >= 0 and the determinant is >= 0 (a small relative slack
+  // for float rounding). All zero (an uncalibrated model) is PSD.
+  const double yy = c.cov_yy_mm2(), yr = c.cov_yr_mm2(), rr = c.cov_rr_mm2();
+  if (!std::isfinite(yy) || !std::isfinite(yr) || !std::isfinite(rr) || yy < 0 || rr < 0 ||
+      yy * rr - yr * yr < -1e-6 * std::max(1.0, yy * rr)) {
+    return safety::Rejection::kBadCovariance;
+  }
+  return safety::Rejection::kNone;
+}
+
 Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int64_t now_ns) {
   ++counters_.messages;
   auto it = streams_.find(stream);
@@ -134,58 +236,74 @@ Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int
       Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
       return Refuse(s, v1::HELLO_REFUSAL_UNKNOWN_PATCH, "the scene names no patch '" + m.patch_id() + "'", now_ns);
     }
-    const PatchExpectation& want = setup_.patches[static_cast<std::size_t>(patch)];
-    const v1::PatchHello& h = m.hello();
-    if (h.patch_name() != want.spec_name || h.patch_fingerprint() != want.spec_fingerprint ||
-        h.model_patch_fingerprint() != want.spec_fingerprint) {
-      Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
-      return Refuse(s, v1::HELLO_REFUSAL_SPEC_MISMATCH,
-                    "patch '" + m.patch_id() + "': expected spec '" + want.spec_name + "' (" + want.spec_fingerprint +
-                        "), the decoder has '" + h.patch_name() + "' (" + h.patch_fingerprint() +
-                        ", model trained for " + h.model_patch_fingerprint() + ")",
-                    now_ns);
+    const std::size_t pi = static_cast<std::size_t>(patch);
+    // The duplicate check comes first: a hello for a patch with a live stream changes nothing of that stream
+    // or of the safety state, whatever it says -- unless the live stream has been silent past
+    // kTakeoverWatchdogs watchdogs (a half-open link): then the newcomer may take the patch over.
+    int replaced = -1;
+    {
+      PatchLink& link = links_[pi];
+      if (link.stream >= 0 && link.stream != stream) {
+        const std::int64_t watchdog_ns = setup_.safety.patches[pi].silence_deadline_ns;
+        const bool silent = now_ns - link.last_seen_ns > kTakeoverWatchdogs * watchdog_ns;
+        if (!silent) {
+          return Refuse(s, v1::HELLO_REFUSAL_DUPLICATE_PATCH,
+                        "patch '" + m.patch_id() + "' is held by another live stream (" +
+                            link.hello.decoder_instance() + ")",
+                        now_ns);
+        }
+        replaced = link.stream;
+      }
     }
-    if (!want.model_sha256.empty() && h.model_sha256() != want.model_sha256) {
-      Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
-      return Refuse(s, v1::HELLO_REFUSAL_MODEL_MISMATCH,
-                    "patch '" + m.patch_id() + "': expected model sha256 " + want.model_sha256 + ", the decoder runs " +
-                        h.model_name() + " (" + h.model_sha256() + ")",
-                    now_ns);
+    std::string why;
+    const v1::HelloRefusal refusal = CheckHello(pi, m.hello(), why);
+    if (refusal != v1::HELLO_REFUSAL_UNSPECIFIED) {
+      // Only a patch with no stream becomes missing: a silent stream still holding it is already a FAULT
+      // (silent), and stays the patch's stream (were it to speak again, it is judged as before).
+      if (links_[pi].stream < 0) Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
+      return Refuse(s, refusal, why, now_ns);
     }
-    if (h.heartbeat_period_ns() <= 0 || h.heartbeat_period_ns() > setup_.max_heartbeat_period_ns) {
-      Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
-      return Refuse(s, v1::HELLO_REFUSAL_RATE_MISMATCH,
-                    "heartbeat period " + std::to_string(h.heartbeat_period_ns()) + " ns; at most " +
-                        std::to_string(setup_.max_heartbeat_period_ns) + " ns",
-                    now_ns);
+    Reply r;
+    if (replaced >= 0) {
+      // The silent stream is forgotten here (its patch goes to the newcomer); the caller ends it.
+      auto old = streams_.find(replaced);
+      if (old != streams_.end()) streams_.erase(old);
+      ++counters_.takeovers;
+      Event e;
+      e.takeover = true;
+      e.replaced_stream = replaced;
+      e.cause_patch = m.patch_id();
+      e.safety.t_ns = now_ns;
+      e.safety.state = data_.state().state;
+      e.safety.stop_epoch = data_.state().stop_epoch;
+      events_.push_back(std::move(e));
+      r.end_stream = replaced;
+      // The old stream's end is a disconnect (the patch was silent: the same cause, no new epoch).
+      Note(policy_.OnDisconnect(data_, m.patch_id(), now_ns));
     }
-    PatchLink& link = links_[static_cast<std::size_t>(patch)];
-    if (link.stream >= 0 && link.stream != stream) {
-      // The live stream keeps the patch; the newcomer is refused (and the patch's state is left alone).
-      return Refuse(s, v1::HELLO_REFUSAL_DUPLICATE_PATCH,
-                    "patch '" + m.patch_id() + "' is held by another live stream (" + link.hello.decoder_instance() + ")",
-                    now_ns);
-    }
+    PatchLink& link = links_[pi];
     s.hello_done = true;
     s.patch = patch;
     s.seq = 1;
     link = PatchLink{};
     link.stream = stream;
-    link.hello = h;
+    link.hello = m.hello();
     link.last_seen_ns = now_ns;
     link.last_seq = 1;
     ++counters_.hellos_accepted;
     Note(policy_.OnHelloAccepted(data_, m.patch_id(), now_ns));
-    Reply r;
     r.command = Command(now_ns);
     auto* a = r.command->mutable_hello_accepted();
     a->set_patch_id(m.patch_id());
-    a->set_watchdog_ns(setup_.safety.patches[static_cast<std::size_t>(patch)].silence_deadline_ns);
+    a->set_watchdog_ns(setup_.safety.patches[pi].silence_deadline_ns);
     a->set_aggregator_instance(setup_.instance);
+    a->set_aggregator_run_id(setup_.run_id);
+    a->set_robot_name(setup_.robot_name);
     return r;
   }
   if (s.patch < 0) return Reply{std::nullopt, true};  // refused earlier: nothing more is read
-  PatchLink& link = links_[static_cast<std::size_t>(s.patch)];
+  const std::size_t pi = static_cast<std::size_t>(s.patch);
+  PatchLink& link = links_[pi];
   const std::string_view id = policy_.patch_id(s.patch);
   if (m.seq() != s.seq + 1 || m.patch_id() != id) {
     return ProtocolError(stream, s, "seq or patch id broken", now_ns);
@@ -193,27 +311,84 @@ Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int
   s.seq = m.seq();
   link.last_seen_ns = now_ns;
   link.last_seq = m.seq();
-  if (m.t_ns() != 0) {
+  const bool time_plausible = m.t_ns() == 0 || !FarApart(m.t_ns(), now_ns, setup_.safety.input.max_time_skew_ns);
+  if (m.t_ns() != 0 && time_plausible) {
     link.last_t_ns = m.t_ns();
     link.clock_offset_ns = m.decoder_t_ns() != 0 ? now_ns - m.decoder_t_ns() : 0;
   }
   switch (m.body_case()) {
-    case v1::PatchMessage::kHello:
-      link.hello = m.hello();  // a hello resent on request; checked as the first was
+    case v1::PatchMessage::kHello: {
+      // A hello re-sent on the live stream is checked as the first was; a mismatch ends the stream.
+      std::string why;
+      if (CheckHello(pi, m.hello(), why) != v1::HELLO_REFUSAL_UNSPECIFIED) {
+        Bad(BadInput::kHelloChanged);
+        return ProtocolError(stream, s, "a re-sent hello does not match the scene: " + why, now_ns);
+      }
+      link.hello = m.hello();
       break;
+    }
     case v1::PatchMessage::kHeartbeat: {
       link.heartbeat = m.heartbeat();
       safety::Heartbeat hb;
       hb.healthy = m.heartbeat().healthy();
-      hb.active_fault = static_cast<safety::PatchFaultCode>(
-          std::clamp<int>(m.heartbeat().active_fault(), 0, static_cast<int>(safety::kPatchFaultCodeCount) - 1));
+      if (const auto code = FaultCode(m.heartbeat().active_fault())) {
+        hb.active_fault = *code;
+      } else {
+        Bad(BadInput::kUnknownFaultCode);  // outside the contract (negative too): a fault, never "no fault"
+        hb.active_fault = safety::PatchFaultCode::kInternal;
+      }
+      if (!time_plausible) {
+        // The frame this heartbeat vouches for is implausibly far from now: the patch's data is not current
+        // (a fault of its own unless the decoder already names one).
+        Bad(BadInput::kImplausibleTime);
+        if (hb.active_fault == safety::PatchFaultCode::kUnspecified) hb.active_fault = safety::PatchFaultCode::kLate;
+      }
       hb.in_contact = m.heartbeat().in_contact();
+      if (hb.healthy && hb.active_fault == safety::PatchFaultCode::kUnspecified && !hb.in_contact) {
+        // The decoder's gate is closed: the contact has ended here too (as in the policy), also a doubt's.
+        link.in_contact = false;
+        link.doubtful = false;
+      }
       Note(policy_.OnHeartbeat(data_, id, hb, now_ns));
       break;
     }
     case v1::PatchMessage::kContact: {
       ++counters_.contacts;
       const v1::PatchContact& c = m.contact();
+      const safety::Rejection doubt = CheckContact(pi, m, now_ns);
+      const auto& pc = setup_.safety.patches[pi];
+      safety::Contact sc;
+      sc.force_n = c.force_n();
+      sc.released = c.released();
+      sc.t_ns = m.t_ns();
+      sc.doubt = doubt;
+      if (doubt != safety::Rejection::kNone) {
+        // Not placed, not kept for WatchContacts as it stands: a doubt held as a contact at the patch (no
+        // position), so the set still shows that something is there. Never a NaN on the wire.
+        Bad(doubt == safety::Rejection::kBadPosition     ? BadInput::kBadPosition
+            : doubt == safety::Rejection::kBadCovariance ? BadInput::kBadCovariance
+                                                         : BadInput::kImplausibleTime);
+        v1::BodyContact body;
+        body.set_contact_id(link.in_contact ? link.contact.contact_id() : ++contact_ids_);
+        body.set_onset_t_ns(link.in_contact ? link.contact.onset_t_ns() : now_ns);
+        body.set_t_ns(doubt == safety::Rejection::kImplausibleTime ? now_ns : m.t_ns());
+        body.set_force_n(std::isfinite(c.force_n()) ? c.force_n() : -1.0f);
+        body.add_patch_ids(std::string(id));
+        body.set_body_region(pc.region);
+        if (const auto* mount = setup_.patches[pi].mount ? &*setup_.patches[pi].mount : nullptr) {
+          body.set_link(mount->link);
+        }
+        const std::int32_t region = policy_.FindRegion(pc.region);
+        if (region >= 0) body.set_threshold_n(setup_.safety.regions[static_cast<std::size_t>(region)].threshold_n);
+        body.set_located(false);
+        link.in_contact = true;  // a doubt is held until a good frame says otherwise
+        link.contact = body;
+        link.surface = v1::PatchContact{};
+        link.surface.set_force_n(body.force_n());
+        link.doubtful = true;
+        Note(policy_.OnContact(data_, id, sc, now_ns));
+        break;
+      }
       v1::BodyContact body;
       if (c.onset() || !link.in_contact) body.set_contact_id(++contact_ids_);
       else body.set_contact_id(link.contact.contact_id());
@@ -221,31 +396,26 @@ Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int
       const bool placed = PlaceContact(s.patch, m.t_ns(), c, body);
       if (placed) ++counters_.contacts_placed;
       body.set_t_ns(m.t_ns());
-      body.set_force_n(c.force_n());
-      body.set_force_sd_n(c.force_sd_n());
+      body.set_force_n(std::isfinite(c.force_n()) ? c.force_n() : -1.0f);
+      body.set_force_sd_n(std::isfinite(c.force_sd_n()) ? c.force_sd_n() : 0.0f);
       body.add_patch_ids(std::string(id));
-      const auto& pc = setup_.safety.patches[static_cast<std::size_t>(s.patch)];
       body.set_body_region(pc.region);
       const std::int32_t region = policy_.FindRegion(pc.region);
       if (region >= 0) body.set_threshold_n(setup_.safety.regions[static_cast<std::size_t>(region)].threshold_n);
       link.in_contact = !c.released();
       link.contact = body;
       link.surface = c;
-      safety::Contact sc;
-      sc.force_n = c.force_n();
-      sc.released = c.released();
-      sc.t_ns = m.t_ns();
+      link.doubtful = !std::isfinite(c.force_n()) || c.force_n() < -setup_.safety.input.negative_force_tolerance_n;
       if (placed) sc.p_bc_m = std::array<double, 3>{body.p_bc_m().x(), body.p_bc_m().y(), body.p_bc_m().z()};
       Note(policy_.OnContact(data_, id, sc, now_ns));
       break;
     }
     case v1::PatchMessage::kFault: {
       link.fault = m.fault();
-      const int code = m.fault().code();
-      Note(policy_.OnPatchFault(data_, id,
-                                static_cast<safety::PatchFaultCode>(
-                                    code >= 0 && code < static_cast<int>(safety::kPatchFaultCodeCount) ? code : 0),
-                                now_ns));
+      const auto code = FaultCode(m.fault().code());
+      if (!code) Bad(BadInput::kUnknownFaultCode);
+      // An unknown code is still a fault (PatchFaultCode kUnspecified in a PatchFault: "unknown, still a fault").
+      Note(policy_.OnPatchFault(data_, id, code.value_or(safety::PatchFaultCode::kInternal), now_ns));
       break;
     }
     case v1::PatchMessage::BODY_NOT_SET:
@@ -267,7 +437,7 @@ void Core::CloseStream(int stream, std::int64_t now_ns) {
   Note(policy_.OnDisconnect(data_, policy_.patch_id(patch), now_ns));
 }
 
-JointRejection Core::OnJointState(const v1::JointState& js, std::int64_t now_ns) {
+JointRejection Core::OnJointState(const v1::JointState& js, std::int64_t now_ns, int joint_stream) {
   auto reject = [&](JointRejection r) {
     ++counters_.joint_states[static_cast<std::size_t>(r)];
     return r;
@@ -284,16 +454,29 @@ JointRejection Core::OnJointState(const v1::JointState& js, std::int64_t now_ns)
     if (named && js.names(static_cast<int>(i)) != model.dof_joint(i).name) return reject(JointRejection::kWrongNames);
     if (!std::isfinite(js.positions_rad(static_cast<int>(i)))) return reject(JointRejection::kNotFinite);
   }
-  if (!joints_.empty() && js.t_ns() <= joints_.back().t_ns) return reject(JointRejection::kNotMonotonic);
+  // Plausible first (so a wild stamp never becomes the monotonic reference), then monotonic on this stream.
+  if (FarApart(js.t_ns(), now_ns, setup_.safety.input.max_time_skew_ns)) return reject(JointRejection::kImplausibleTime);
+  auto [last, fresh] = joint_stream_last_t_ns_.try_emplace(joint_stream, js.t_ns());
+  if (!fresh) {
+    if (js.t_ns() <= last->second) return reject(JointRejection::kNotMonotonic);
+    last->second = js.t_ns();
+  }
   JointSample sample;
   sample.t_ns = js.t_ns();
   sample.q.assign(js.positions_rad().begin(), js.positions_rad().end());
-  joints_.push_back(std::move(sample));
+  // In time order (two streams, or a reconnect, may interleave); an equal stamp replaces the older sample.
+  auto at = std::lower_bound(joints_.begin(), joints_.end(), sample.t_ns,
+                             [](const JointSample& j, std::int64_t t) { return j.t_ns < t; });
+  if (at != joints_.end() && at->t_ns == sample.t_ns) *at = std::move(sample);
+  else joints_.insert(at, std::move(sample));
   while (joints_.size() > 2 && joints_.back().t_ns - joints_.front().t_ns > setup_.joint_history_ns) joints_.pop_front();
+  joint_arrival_ns_ = now_ns;
   ++counters_.joint_states[0];
   Note(policy_.OnJointState(data_, now_ns));
   return JointRejection::kNone;
 }
+
+void Core::CloseJointStream(int joint_stream) { joint_stream_last_t_ns_.erase(joint_stream); }
 
 void Core::JointsAt(std::int64_t t_ns, std::vector<double>& q) const {
   // Linear between the two samples around t_ns, else the nearest end.
@@ -342,10 +525,13 @@ bool Core::PlaceContact(int patch, std::int64_t t_ns, const v1::PatchContact& c,
 }
 
 v1::ResetStopResponse Core::OnReset(const v1::ResetStopRequest& r, bool authorized, std::int64_t now_ns) {
+  if (!data_.events().empty()) DrainPolicyEvents();
   safety::ResetRequest req;
   req.stop_epoch = r.stop_epoch();
   req.authorized = authorized;
+  req.other_run = r.aggregator_run_id() != setup_.run_id;  // 0 (not named) is never this run's
   const safety::ResetResult res = policy_.Reset(data_, req, now_ns);
+  DrainPolicyEvents(r.operator_name());
   if (res.accepted) changed_ = true;
   v1::ResetStopResponse out;
   out.set_accepted(res.accepted);
@@ -370,6 +556,8 @@ v1::SafetyState Core::SafetyState() const {
   out.set_changed_t_ns(s.changed_t_ns);
   out.set_published_t_ns(s.published_t_ns);
   out.set_aggregator_start_t_ns(start_ns_);
+  out.set_aggregator_run_id(setup_.run_id);
+  out.set_robot_name(setup_.robot_name);
   v1::SafetyCause* c = out.mutable_cause();
   c->set_kind(static_cast<v1::SafetyCause::Kind>(s.cause.kind));
   c->set_patch_id(std::string(policy_.patch_id(s.cause.patch)));
@@ -380,8 +568,11 @@ v1::SafetyState Core::SafetyState() const {
   }
   // A NaN force (a doubt) is sent as -1: the wire never carries NaN; the message says what it was.
   c->set_force_n(std::isfinite(s.cause.force_n) ? s.cause.force_n : -1.0f);
-  c->set_threshold_n(s.cause.threshold_n);
-  if (s.cause.p_bc_m) {
+  c->set_threshold_n(std::isfinite(s.cause.threshold_n) ? s.cause.threshold_n : -1.0f);
+  // Only a finite position is published (the Core refuses non-finite ones before placement; this is the
+  // last guard on the wire).
+  if (s.cause.p_bc_m && std::isfinite((*s.cause.p_bc_m)[0]) && std::isfinite((*s.cause.p_bc_m)[1]) &&
+      std::isfinite((*s.cause.p_bc_m)[2])) {
     c->mutable_p_bc_m()->set_x((*s.cause.p_bc_m)[0]);
     c->mutable_p_bc_m()->set_y((*s.cause.p_bc_m)[1]);
     c->mutable_p_bc_m()->set_z((*s.cause.p_bc_m)[2]);
@@ -394,7 +585,6 @@ v1::SafetyState Core::SafetyState() const {
 
 v1::ContactSet Core::Contacts(std::int64_t now_ns) {
   v1::ContactSet set;
-  set.set_t_ns(now_ns);
   set.set_published_t_ns(now_ns);
   set.set_stop_epoch(data_.state().stop_epoch);
   if (!joints_.empty()) set.set_joint_state_t_ns(joints_.back().t_ns);
@@ -402,8 +592,14 @@ v1::ContactSet Core::Contacts(std::int64_t now_ns) {
   // a frame period of each other).
   std::int64_t t_fuse = 0;
   for (const PatchLink& link : links_) {
-    if (link.stream >= 0 && link.in_contact) t_fuse = std::max(t_fuse, link.contact.t_ns());
+    if (link.stream >= 0 && link.in_contact && !link.doubtful) t_fuse = std::max(t_fuse, link.contact.t_ns());
   }
+  // The newest contributing frame's interrogator time (0 when the set is empty), as the contract says.
+  std::int64_t t_newest = 0;
+  for (const PatchLink& link : links_) {
+    if (link.stream >= 0 && link.in_contact) t_newest = std::max(t_newest, link.contact.t_ns());
+  }
+  set.set_t_ns(t_newest);
   bool can_fuse = fuser_ && !joints_.empty();
   if (can_fuse) {
     JointsAt(t_fuse, q_scratch_);
@@ -418,7 +614,7 @@ v1::ContactSet Core::Contacts(std::int64_t now_ns) {
   fusion_inputs_.clear();
   for (std::size_t i = 0; i < links_.size(); ++i) {
     const PatchLink& link = links_[i];
-    if (link.stream < 0 || !link.in_contact) continue;
+    if (link.stream < 0 || !link.in_contact || link.doubtful) continue;
     const v1::PatchContact& c = link.surface;
     fusion::PatchInput in;
     in.patch = i;
@@ -476,6 +672,15 @@ v1::ContactSet Core::Contacts(std::int64_t now_ns) {
     b->set_onset_t_ns(onset);
     b->set_t_ns(t);
   }
+  // A patch in contact that no fused contact covers (a doubt, or a contact the fusion refused) is shown as the
+  // Core holds it, never dropped: something touches that patch.
+  for (std::size_t i = 0; i < links_.size(); ++i) {
+    const PatchLink& link = links_[i];
+    if (link.stream < 0 || !link.in_contact) continue;
+    bool covered = false;
+    for (const fusion::BodyContact& f : fusion_data_->contacts()) covered = covered || f.HasPatch(i);
+    if (!covered) *set.add_contacts() = link.contact;
+  }
   return set;
 }
 
@@ -483,6 +688,8 @@ v1::AggregatorStatus Core::Status(std::int64_t now_ns) const {
   v1::AggregatorStatus st;
   st.set_t_ns(now_ns);
   st.set_aggregator_start_t_ns(start_ns_);
+  st.set_aggregator_run_id(setup_.run_id);
+  st.set_robot_name(setup_.robot_name);
   *st.mutable_safety() = SafetyState();
   const auto patch_states = data_.patches();
   for (std::size_t i = 0; i < links_.size(); ++i) {
@@ -499,10 +706,9 @@ v1::AggregatorStatus Core::Status(std::int64_t now_ns) const {
     *p->mutable_last_heartbeat() = l.heartbeat;
     *p->mutable_last_fault() = l.fault;
   }
-  if (!joints_.empty()) {
-    st.set_joint_state_t_ns(joints_.back().t_ns);
-    st.set_joint_state_age_ns(now_ns - joints_.back().t_ns);
-  }
+  // Age by arrival on the aggregator's own clock (the controller's clock is not this one): never negative.
+  st.set_joint_state_age_ns(joint_arrival_ns_ < 0 ? -1 : std::max<std::int64_t>(0, now_ns - joint_arrival_ns_));
+  if (!joints_.empty()) st.set_joint_state_t_ns(joints_.back().t_ns);
   if (setup_.robot) {
     for (std::size_t i = 0; i < setup_.robot->num_dof(); ++i) st.add_joint_names(setup_.robot->dof_joint(i).name);
   }

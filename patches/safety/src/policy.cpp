@@ -1,5 +1,6 @@
 #include "ruffini/safety/policy.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <utility>
@@ -30,7 +31,7 @@ bool PatchState::operator==(const PatchState& o) const noexcept {
   return link == o.link && ever_connected == o.ever_connected && last_seen_t_ns == o.last_seen_t_ns &&
          healthy_since_t_ns == o.healthy_since_t_ns && fault_in_force == o.fault_in_force && fault == o.fault &&
          protocol_fault == o.protocol_fault && contact_over == o.contact_over &&
-         SameForce(contact_force_n, o.contact_force_n);
+         SameForce(contact_force_n, o.contact_force_n) && contact_below_since_t_ns == o.contact_below_since_t_ns;
 }
 
 // --- Config ---------------------------------------------------------------------------------------------------
@@ -50,6 +51,35 @@ void Validate(const Config& c) {
       s << at << ".threshold_n (" << r.threshold_n << ") must be a finite force above 0 N";
       fail(s.str());
     }
+    if (!(r.release.fraction >= 0.0f && r.release.fraction < 1.0f)) {
+      std::ostringstream s;
+      s << at << ".release.fraction (" << r.release.fraction << ") must lie in 0..1 (1 excluded)";
+      fail(s.str());
+    }
+    if (r.release.hold_ns < 0 || r.release.hold_ns > 60'000'000'000) {
+      fail(at + ".release.hold_ns (" + std::to_string(r.release.hold_ns) + ") must lie in 0..60 s");
+    }
+  }
+  const InputLimits& in = c.input;
+  if (!(in.negative_force_tolerance_n >= 0.0f && in.negative_force_tolerance_n <= 1.0f)) {
+    std::ostringstream s;
+    s << "input.negative_force_tolerance_n (" << in.negative_force_tolerance_n << ") must lie in 0..1 N";
+    fail(s.str());
+  }
+  if (in.max_time_skew_ns <= 0 || in.max_time_skew_ns > 3'600'000'000'000) {
+    fail("input.max_time_skew_ns (" + std::to_string(in.max_time_skew_ns) + ") must lie in 1 ns..1 h");
+  }
+  if (!(in.position_tolerance_y_mm >= 0.0 && in.position_tolerance_y_mm <= 100.0) ||
+      !(in.position_tolerance_r_deg >= 0.0 && in.position_tolerance_r_deg <= 90.0)) {
+    std::ostringstream s;
+    s << "input.position_tolerance (" << in.position_tolerance_y_mm << " mm, " << in.position_tolerance_r_deg
+      << " deg) must lie in 0..100 mm and 0..90 deg";
+    fail(s.str());
+  }
+  if (!(in.sample_rate_hz == 0.0 || (in.sample_rate_hz >= 1.0 && in.sample_rate_hz <= 1e6))) {
+    std::ostringstream s;
+    s << "input.sample_rate_hz (" << in.sample_rate_hz << ") must be 0 (not checked) or 1..1e6 Hz";
+    fail(s.str());
   }
   if (c.patches.empty()) fail("patches is empty: a scene names at least one patch");
   for (std::size_t i = 0; i < c.patches.size(); ++i) {
@@ -88,6 +118,16 @@ Data::Data(const Policy& policy, std::int64_t start_ns) : patches_(policy.patch_
   counters_.faults = 1;
   counters_.causes[static_cast<std::size_t>(CauseKind::kStartup)] = 1;
   counters_.publications = 1;
+}
+
+void Data::Record(const Event& e) noexcept {
+  if (event_count_ == events_.size()) {
+    // Full: the oldest is dropped (counted), so the newest (the one in force) is always there.
+    for (std::size_t i = 1; i < events_.size(); ++i) events_[i - 1] = events_[i];
+    --event_count_;
+    ++counters_.events_dropped;
+  }
+  events_[event_count_++] = e;
 }
 
 // --- Policy: lookups --------------------------------------------------------------------------------------------
@@ -133,6 +173,7 @@ void Policy::Latch(Data& d, const Cause& cause, Severity severity, bool is_new) 
     ++n.causes_while_latched;
     return;
   }
+  EventType type = EventType::kLatch;
   if (s.state == State::kClear) {
     s.state = severity == Severity::kStop ? State::kStop : State::kFault;
     ++(severity == Severity::kStop ? n.stops : n.faults);
@@ -140,6 +181,7 @@ void Policy::Latch(Data& d, const Cause& cause, Severity severity, bool is_new) 
     s.state = State::kFault;  // escalation: a new latch, never the other way
     ++n.faults;
     ++n.escalations;
+    type = EventType::kEscalation;
   } else {
     ++n.causes_while_latched;
     if (!config_.new_epoch_per_cause) return;  // recorded (counters, latest_cause); the epoch stays
@@ -147,6 +189,8 @@ void Policy::Latch(Data& d, const Cause& cause, Severity severity, bool is_new) 
     ++n.epochs;
     s.cause = cause;
     d.dirty_ = true;
+    d.Record({.type = EventType::kNewEpoch, .state = s.state, .stop_epoch = s.stop_epoch, .cause = cause,
+              .t_ns = d.now_ns_});
     return;
   }
   ++s.stop_epoch;
@@ -154,6 +198,7 @@ void Policy::Latch(Data& d, const Cause& cause, Severity severity, bool is_new) 
   s.cause = cause;
   s.changed_t_ns = d.now_ns_;
   d.dirty_ = true;
+  d.Record({.type = type, .state = s.state, .stop_epoch = s.stop_epoch, .cause = cause, .t_ns = d.now_ns_});
 }
 
 Step Policy::Finish(Data& d, Step step) const noexcept {
@@ -168,11 +213,17 @@ Step Policy::Finish(Data& d, Step step) const noexcept {
 }
 
 // Counts the rejection and latches the doubt; the caller publishes (Finish) once.
+// The same rejection again (same kind, patch and reason as the previous refused input since the last reset)
+// is the same cause: counted, no new epoch (a stream of refused heartbeats must not take an epoch each).
+// While CLEAR it latches whatever (Latch), so a doubt is never ignored.
 Rejection Policy::Reject(Data& d, Rejection why, Cause cause, Severity severity) const noexcept {
   ++d.counters_.rejections[static_cast<std::size_t>(why)];
   cause.doubt = why;
   if (cause.t_ns == 0) cause.t_ns = d.now_ns_;
-  Latch(d, cause, severity, true);
+  const Cause& last = d.last_rejection_;
+  const bool same = last.doubt == why && last.kind == cause.kind && last.patch == cause.patch;
+  d.last_rejection_ = cause;
+  Latch(d, cause, severity, !same);
   return why;
 }
 
@@ -261,7 +312,10 @@ Step Policy::OnHeartbeat(Data& d, std::string_view patch_id, const Heartbeat& hb
   const bool healthy = hb.healthy && hb.active_fault == PatchFaultCode::kUnspecified;
   if (healthy) {
     p.fault_in_force = false;
-    if (!hb.in_contact) p.contact_over = false;  // the decoder's gate is closed: the contact has ended
+    if (!hb.in_contact) {  // the decoder's gate is closed: the contact has ended
+      p.contact_over = false;
+      p.contact_below_since_t_ns.reset();
+    }
     if (p.protocol_fault) {
       p.link = LinkState::kUnhealthy;
     } else {
@@ -284,8 +338,8 @@ Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std
   if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
   Cause cause{.kind = CauseKind::kContact,
               .force_n = c.force_n,
-              .p_bc_m = c.p_bc_m,
-              .t_ns = c.t_ns != 0 ? c.t_ns : now_ns};
+              .p_bc_m = c.doubt == Rejection::kNone ? c.p_bc_m : std::nullopt,
+              .t_ns = c.t_ns != 0 && c.doubt != Rejection::kImplausibleTime ? c.t_ns : now_ns};
   const std::int32_t i = FindPatch(patch_id);
   if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, cause, Severity::kStop);
   cause.patch = i;
@@ -300,24 +354,52 @@ Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std
     cause.threshold_n = config_.regions[static_cast<std::size_t>(region)].threshold_n;
     if (!std::isfinite(c.force_n)) {
       why = Rejection::kNonFiniteForce;
-    } else if (c.force_n < 0.0f) {
+    } else if (c.force_n < -config_.input.negative_force_tolerance_n) {
       why = Rejection::kNegativeForce;
+    } else if (c.doubt != Rejection::kNone) {
+      why = c.doubt;
     } else if (!HasStream(p.link)) {
       why = Rejection::kNotConnected;
     }
   }
   if (why != Rejection::kNone) {
-    // A contact the policy cannot judge counts as one above its threshold until a good frame, a release or
-    // a healthy heartbeat out of contact says otherwise.
+    // A contact the policy cannot judge counts as one above its threshold until a good frame (and the
+    // release hold), a release or a healthy heartbeat out of contact says otherwise. A doubt while the
+    // contact is already held is the same cause (no new epoch).
+    const bool was_over = p.contact_over;
     p.contact_over = true;
+    p.contact_below_since_t_ns.reset();
     p.contact_force_n = c.force_n;
-    return Refuse(d, why, cause, Severity::kStop);
+    ++d.counters_.rejections[static_cast<std::size_t>(why)];
+    cause.doubt = why;
+    d.last_rejection_ = cause;
+    Latch(d, cause, Severity::kStop, !was_over);
+    return Finish(d, {.rejection = why});
   }
   Seen(d, static_cast<std::size_t>(i));
-  const bool over = c.force_n > cause.threshold_n;  // at the threshold never stops
+  const float force_n = std::max(c.force_n, 0.0f);  // within the noise tolerance below 0: judged as 0 N
+  const RegionConfig& rc = config_.regions[static_cast<std::size_t>(region)];
+  const bool over = force_n > cause.threshold_n;  // at the threshold never stops
   const bool was_over = p.contact_over;
   p.contact_force_n = c.force_n;
-  p.contact_over = over && !c.released;
+  if (c.released) {
+    p.contact_over = false;  // the decoder's gate closed: the contact has ended
+    p.contact_below_since_t_ns.reset();
+  } else if (over) {
+    p.contact_over = true;
+    p.contact_below_since_t_ns.reset();
+  } else if (was_over) {
+    // Hysteresis: the cause ends once the force has stayed below the release level for the hold time.
+    if (force_n < cause.threshold_n * (1.0f - rc.release.fraction)) {
+      if (!p.contact_below_since_t_ns) p.contact_below_since_t_ns = now_ns;
+      if (now_ns - *p.contact_below_since_t_ns >= rc.release.hold_ns) {
+        p.contact_over = false;
+        p.contact_below_since_t_ns.reset();
+      }
+    } else {
+      p.contact_below_since_t_ns.reset();  // between the release level and the threshold: still held
+    }
+  }
   if (over) Latch(d, cause, Severity::kStop, !was_over);
   return Finish(d, {});
 }
@@ -407,6 +489,8 @@ Step Policy::Shutdown(Data& d, std::int64_t now_ns) const noexcept {
   d.latest_cause_ = cause;
   d.shutting_down_ = true;
   d.dirty_ = true;
+  d.Record({.type = EventType::kShutdown, .state = State::kFault, .stop_epoch = s.stop_epoch, .cause = cause,
+            .t_ns = d.now_ns_});
   return Finish(d, step);
 }
 
@@ -427,7 +511,7 @@ Cause Policy::FirstCausePresent(const Data& d, std::int64_t now_ns) const noexce
     if (p.fault_in_force) {
       return {.kind = CauseKind::kPatchFault, .patch = i, .patch_fault = p.fault, .t_ns = now_ns};
     }
-    if (p.contact_over) {
+    if (ContactPresent(p, k, now_ns)) {
       const std::int32_t region = FindRegion(config_.patches[k].region);
       return {.kind = CauseKind::kContact,
               .patch = i,
@@ -444,12 +528,30 @@ Cause Policy::FirstCausePresent(const Data& d, std::int64_t now_ns) const noexce
   return {};
 }
 
+const ContactRelease& Policy::ReleaseOf(std::size_t patch) const noexcept {
+  const std::int32_t region = FindRegion(config_.patches[patch].region);
+  return config_.regions[static_cast<std::size_t>(region)].release;  // Validate(): every patch's region exists
+}
+
+// contact_over, with the release hold judged at now_ns (no frame needs to arrive for the hold to run out).
+bool Policy::ContactPresent(const PatchState& p, std::size_t patch, std::int64_t now_ns) const noexcept {
+  if (!p.contact_over) return false;
+  return !p.contact_below_since_t_ns || now_ns - *p.contact_below_since_t_ns < ReleaseOf(patch).hold_ns;
+}
+
 ResetResult Policy::Reset(Data& d, const ResetRequest& r, std::int64_t now_ns) const noexcept {
   ResetResult out;
   auto refuse = [&](ResetRefusal why) {
     ++d.counters_.resets_refused[static_cast<std::size_t>(why)];
     out.reason = why;
     out.current_epoch = d.state_.stop_epoch;
+    d.Record({.type = EventType::kResetRefused,
+              .state = d.state_.state,
+              .stop_epoch = d.state_.stop_epoch,
+              .cause = out.blocking,
+              .reset_refusal = why,
+              .reset_epoch = r.stop_epoch,
+              .t_ns = now_ns});
     return out;
   };
   if (now_ns < d.now_ns_) {
@@ -457,6 +559,7 @@ ResetResult Policy::Reset(Data& d, const ResetRequest& r, std::int64_t now_ns) c
     return refuse(ResetRefusal::kInvalidRequest);
   }
   if (!r.authorized) return refuse(ResetRefusal::kUnauthorized);
+  if (r.other_run) return refuse(ResetRefusal::kWrongRun);
   if (d.shutting_down_) return refuse(ResetRefusal::kShuttingDown);
   if (d.state_.state == State::kClear) return refuse(ResetRefusal::kNotLatched);
   if (r.stop_epoch != d.state_.stop_epoch) return refuse(ResetRefusal::kWrongEpoch);
@@ -471,7 +574,13 @@ ResetResult Policy::Reset(Data& d, const ResetRequest& r, std::int64_t now_ns) c
       return refuse(ResetRefusal::kNotHealthyLongEnough);
     }
   }
-  // Accepted. Nothing was due at now_ns (FirstCausePresent judged every deadline at it), so none is skipped.
+  // Accepted. Nothing was due at now_ns (FirstCausePresent judged every deadline at it), so none is skipped;
+  // a contact whose release hold ran out by now_ns is over.
+  for (PatchState& p : d.patches_) {
+    p.contact_over = false;
+    p.contact_below_since_t_ns.reset();
+  }
+  d.last_rejection_ = Cause{};
   d.now_ns_ = now_ns;
   d.state_.state = State::kClear;
   d.state_.cause = Cause{};
@@ -481,6 +590,11 @@ ResetResult Policy::Reset(Data& d, const ResetRequest& r, std::int64_t now_ns) c
   Finish(d, {});
   out.accepted = true;
   out.current_epoch = d.state_.stop_epoch;
+  d.Record({.type = EventType::kResetAccepted,
+            .state = State::kClear,
+            .stop_epoch = d.state_.stop_epoch,
+            .reset_epoch = r.stop_epoch,
+            .t_ns = now_ns});
   return out;
 }
 
@@ -507,6 +621,8 @@ std::string_view CauseKindName(CauseKind k) noexcept {
     case CauseKind::kStartup: return "startup";
     case CauseKind::kShuttingDown: return "shutting_down";
     case CauseKind::kInternal: return "internal";
+    case CauseKind::kPatchLate: return "patch_late";
+    case CauseKind::kLinkErrors: return "link_errors";
   }
   return "unspecified";
 }
@@ -521,6 +637,7 @@ std::string_view ResetRefusalName(ResetRefusal r) noexcept {
     case ResetRefusal::kUnauthorized: return "unauthorized";
     case ResetRefusal::kShuttingDown: return "shutting_down";
     case ResetRefusal::kInvalidRequest: return "invalid_request";
+    case ResetRefusal::kWrongRun: return "wrong_run";
   }
   return "unspecified";
 }
@@ -551,6 +668,7 @@ std::string_view PatchFaultCodeName(PatchFaultCode c) noexcept {
     case PatchFaultCode::kOverloaded: return "overloaded";
     case PatchFaultCode::kShuttingDown: return "shutting_down";
     case PatchFaultCode::kInternal: return "internal";
+    case PatchFaultCode::kLate: return "late";
   }
   return "unspecified";
 }
@@ -564,8 +682,23 @@ std::string_view RejectionName(Rejection r) noexcept {
     case Rejection::kNonFiniteForce: return "non_finite_force";
     case Rejection::kNegativeForce: return "negative_force";
     case Rejection::kNotConnected: return "not_connected";
+    case Rejection::kBadPosition: return "bad_position";
+    case Rejection::kBadCovariance: return "bad_covariance";
+    case Rejection::kImplausibleTime: return "implausible_time";
   }
   return "none";
+}
+
+std::string_view EventTypeName(EventType t) noexcept {
+  switch (t) {
+    case EventType::kLatch: return "latch";
+    case EventType::kEscalation: return "escalation";
+    case EventType::kNewEpoch: return "new_epoch";
+    case EventType::kShutdown: return "shutdown";
+    case EventType::kResetAccepted: return "reset_accepted";
+    case EventType::kResetRefused: return "reset_refused";
+  }
+  return "unknown";
 }
 
 std::string Describe(const Policy& p, const Cause& c) {
@@ -601,6 +734,7 @@ std::string Describe(const Policy& p, const ResetResult& r) {
     case ResetRefusal::kUnauthorized: s << "the caller may not reset"; break;
     case ResetRefusal::kShuttingDown: s << "the aggregator is shutting down"; break;
     case ResetRefusal::kInvalidRequest: s << "the aggregator's clock went backwards"; break;
+    case ResetRefusal::kWrongRun: s << "the request names another aggregator run (aggregator_run_id)"; break;
     case ResetRefusal::kNone: break;
   }
   return s.str();

@@ -15,6 +15,25 @@ constexpr double kMaxHealthyMs = 600'000.0;
 std::int64_t ToNs(double ms) { return static_cast<std::int64_t>(std::llround(ms * kNsPerMs)); }
 double ToMs(std::int64_t ns) { return static_cast<double>(ns) / kNsPerMs; }
 
+// `{fraction: F, hold_ms: T, source: "..."}`: the hysteresis of a contact cause (ContactRelease).
+ContactRelease ReadRelease(YamlReader m, const ContactRelease& fallback) {
+  ContactRelease r = fallback;
+  r.fraction = static_cast<float>(m.NumberOr("fraction", fallback.fraction, 0.0, 0.9));
+  r.hold_ns = ToNs(m.NumberOr("hold_ms", ToMs(fallback.hold_ns), 0.0, kMaxDeadlineMs));
+  if (!m.Has("source")) {
+    m.Fail("source", "is missing: say why this release level and hold time (a number carries where it comes from)");
+  }
+  r.source = m.String("source");
+  m.Finish();
+  return r;
+}
+
+// A mapping's `source:` is required whenever the mapping is written.
+std::string Source(YamlReader& m, const char* what) {
+  if (!m.Has("source")) m.Fail("source", std::string("is missing: say where ") + what + " comes from, or why");
+  return m.String("source");
+}
+
 }  // namespace
 
 Config ConfigFromScene(const SceneFile& scene) {
@@ -23,6 +42,8 @@ Config ConfigFromScene(const SceneFile& scene) {
   }
   YamlReader s = *scene.safety;
   Config c;
+  ContactRelease release;  // the section's default for every region
+  if (auto m = s.MapOr("contact_release")) release = ReadRelease(*m, release);
   for (YamlReader& reg : s.Sequence("regions")) {
     RegionConfig rc;
     rc.name = reg.String("name");
@@ -40,6 +61,8 @@ Config ConfigFromScene(const SceneFile& scene) {
                          "sources, FACTS.md), or why it was chosen");
     }
     rc.source = reg.String("source");
+    rc.release = release;
+    if (auto m = reg.MapOr("release")) rc.release = ReadRelease(*m, release);
     reg.Finish();
     c.regions.push_back(std::move(rc));
   }
@@ -59,6 +82,39 @@ Config ConfigFromScene(const SceneFile& scene) {
   c.healthy_before_reset_ns =
       ToNs(s.NumberOr("healthy_before_reset_ms", ToMs(c.healthy_before_reset_ns), 0.0, kMaxHealthyMs));
   c.new_epoch_per_cause = s.BoolOr("new_epoch_per_cause", c.new_epoch_per_cause);
+  InputLimits& in = c.input;
+  std::string sources;
+  auto add_source = [&](const std::string& key, const std::string& text) {
+    sources += (sources.empty() ? "" : "; ") + key + ": " + text;
+  };
+  if (auto m = s.MapOr("negative_force_tolerance")) {
+    in.negative_force_tolerance_n = static_cast<float>(m->Number("force_n", 0.0, 1.0));
+    add_source("negative_force_tolerance", Source(*m, "this tolerance"));
+    m->Finish();
+  }
+  if (auto m = s.MapOr("time_skew")) {
+    in.max_time_skew_ns = ToNs(m->Number("max_ms", 0.001, 3'600'000.0));
+    add_source("time_skew", Source(*m, "this bound"));
+    m->Finish();
+  }
+  if (auto m = s.MapOr("position_tolerance")) {
+    in.position_tolerance_y_mm = m->NumberOr("y_mm", in.position_tolerance_y_mm, 0.0, 100.0);
+    in.position_tolerance_r_deg = m->NumberOr("r_deg", in.position_tolerance_r_deg, 0.0, 90.0);
+    add_source("position_tolerance", Source(*m, "this tolerance"));
+    m->Finish();
+  }
+  if (auto m = s.MapOr("decoders")) {
+    in.sample_rate_hz = m->NumberOr("sample_rate_hz", 0.0, 1.0, 1e6);
+    in.decoder_config_sha256 = m->StringOr("config_sha256", "");
+    if (!in.decoder_config_sha256.empty() &&
+        (in.decoder_config_sha256.size() != 64 ||
+         in.decoder_config_sha256.find_first_not_of("0123456789abcdef") != std::string::npos)) {
+      m->Fail("config_sha256", "must be a SHA-256 in lower-case hex (64 characters), as PatchHello sends it");
+    }
+    add_source("decoders", Source(*m, "this expectation"));
+    m->Finish();
+  }
+  in.source = sources;
   s.Finish();
 
   for (const SceneFilePatch& p : scene.patches) {

@@ -5,11 +5,25 @@
 // thread calls these methods (DESIGN.md, "Threads and time"), so a test can replay any sequence.
 //
 // A Connect stream's rules (docs/contracts.md): the first message is a PatchHello with seq 1 naming a scene
-// patch whose spec fingerprint and model SHA-256 are the scene's, and no other live stream holds that patch;
-// otherwise the hello is refused (the stream ends, the patch stays missing). After it, seq rises by exactly 1
-// and the patch id never changes; a break is a protocol error (the stream ends, FAULT). Heartbeats, contacts
-// and faults go to the safety policy (ruffini::safety); contacts are placed in the base frame with the
-// joint state interpolated at the contact's timestamp.
+// patch. If another live stream holds that patch the hello is refused DUPLICATE_PATCH first, before anything
+// else is looked at, and nothing else changes (the live stream keeps its health, no epoch is taken) -- unless
+// that stream has been silent for more than kTakeoverWatchdogs watchdogs: then the old stream is ended
+// (Reply.end_stream) and the newcomer takes the patch (a restarted decoder after a half-open link). Then the
+// spec fingerprint, model SHA-256, heartbeat period, sample rate and decoder configuration must be the
+// scene's; otherwise the hello is refused (the stream ends, and a patch with no live stream stays or becomes
+// missing: FAULT). After it, seq rises by exactly 1 and the patch id never changes; a break is a protocol
+// error (the stream ends, FAULT). A hello re-sent on the live stream is checked like the first; a mismatch is
+// a protocol error of that stream. Heartbeats, contacts and faults go to the safety policy (ruffini::safety);
+// contacts are placed in the base frame with the joint state interpolated at the contact's timestamp.
+//
+// Bad input is a doubt, never passed on (docs/safety.md, "Bad input"): a located contact with a non-finite or
+// off-patch position or a non-finite / non-PSD covariance, a contact frame whose t_ns is implausibly far from
+// its arrival (safety::InputLimits), are refused as a STOP; a heartbeat's active_fault outside the contract's
+// enum is a fault (kInternal), counted. No NaN reaches SafetyState or ContactSet.
+//
+// Identity (docs/contracts.md): every SafetyState, AggregatorStatus and HelloAccepted carries Setup.run_id
+// (random, nonzero, drawn by the service at start) and Setup.robot_name; a ResetStop naming another run (or
+// none) is refused WRONG_RUN and changes nothing else.
 #include <cstdint>
 #include <deque>
 #include <map>
@@ -34,7 +48,13 @@ struct PatchExpectation {
   std::string spec_fingerprint;
   std::string model_sha256;      // "": any model trained for the spec
   std::optional<robot::PatchMount> mount;  // where it sits on the robot (none: not placed)
+  double extent_y_mm = 150.0;    // the spec's surface: Y in 0..extent_y_mm, R in 0..extent_r_deg
+  double extent_r_deg = 145.0;
 };
+
+// A live stream silent for more than this many watchdogs (its patch's silence deadline) is replaced by a
+// new hello for its patch.
+inline constexpr std::int64_t kTakeoverWatchdogs = 3;
 
 struct Setup {
   safety::Config safety;
@@ -43,6 +63,8 @@ struct Setup {
   std::int64_t max_heartbeat_period_ns = 10'000'000;  // a decoder announcing a slower heartbeat is refused
   std::int64_t joint_history_ns = 1'000'000'000;      // how much joint-state history is kept for placement
   std::string instance = "aggregator";
+  std::uint64_t run_id = 0;        // this aggregator run (nonzero; the service draws it with std::random_device)
+  std::string robot_name;          // the scene's `name`
 };
 
 // Joint-state rejections (counted, logged by the service; a rejected state is not used).
@@ -52,10 +74,32 @@ enum class JointRejection : std::uint8_t {
   kWrongCount,       // names / positions do not match the robot's joints
   kWrongNames,       // a name differs from the robot's joint (in the robot's order)
   kNotFinite,        // a NaN or infinite position
-  kNotMonotonic,     // t_ns not after the previous state's
+  kNotMonotonic,     // t_ns not after the previous state's on the same stream
+  kImplausibleTime,  // t_ns further than InputLimits.max_time_skew_ns from its arrival
 };
-inline constexpr std::size_t kJointRejectionCount = 6;
+inline constexpr std::size_t kJointRejectionCount = 7;
 std::string_view JointRejectionName(JointRejection r) noexcept;
+
+// Input refused or corrected before the policy saw it (counted; the policy counts its own rejections too).
+enum class BadInput : std::uint8_t {
+  kBadPosition = 0,     // a located contact's position is not finite or off the patch: STOP
+  kBadCovariance,       // a located contact's covariance is not finite or not PSD: STOP
+  kImplausibleTime,     // a contact frame (STOP) or another message (its t_ns not used) far from arrival
+  kUnknownFaultCode,    // a heartbeat's or PatchFault's code outside the enum: a fault (kInternal)
+  kHelloChanged,        // a hello re-sent on a live stream differs from what the scene expects: protocol error
+};
+inline constexpr std::size_t kBadInputCount = 5;
+std::string_view BadInputName(BadInput b) noexcept;
+
+// One line of the service's log (docs/safety.md, "Events"): the policy's latches, escalations, new epochs,
+// shutdown and resets, with who asked for a reset; and a stream replaced by a takeover.
+struct Event {
+  safety::Event safety{};          // type, state, epoch, cause (patch index, force) as the policy recorded it
+  std::string operator_name;       // resets: ResetStopRequest.operator_name
+  std::string cause_patch;         // the cause's patch id ("" none)
+  bool takeover = false;           // true: not a policy event; `replaced_stream` was ended for `cause_patch`
+  int replaced_stream = -1;
+};
 
 struct Counters {
   std::uint64_t messages = 0;
@@ -65,6 +109,8 @@ struct Counters {
   std::uint64_t contacts = 0;                     // contact messages
   std::uint64_t contacts_placed = 0;              // placed in the base frame
   std::array<std::uint64_t, kJointRejectionCount> joint_states{};  // [0]: accepted
+  std::array<std::uint64_t, kBadInputCount> bad_input{};          // by BadInput
+  std::uint64_t takeovers = 0;                                    // silent streams replaced by a new hello
 };
 
 class Core {
@@ -80,12 +126,19 @@ class Core {
   struct Reply {
     std::optional<v1::AggregatorCommand> command;  // to send on the stream
     bool close = false;                            // end the stream (after the command, if any)
+    // Another stream the caller must end now (Finish it; the Core has already forgotten it): the silent
+    // stream this hello took its patch from. -1: none.
+    int end_stream = -1;
   };
   Reply OnPatchMessage(int stream, const v1::PatchMessage& m, std::int64_t now_ns);
   void CloseStream(int stream, std::int64_t now_ns);
 
   // --- Joint states (PublishJointStates) ---
-  JointRejection OnJointState(const v1::JointState& js, std::int64_t now_ns);
+  // joint_stream: which PublishJointStates call this came on (the monotonic rule is per stream, so one bad
+  // stamp cannot lock out a controller that reconnects); 0 for a caller that has only one.
+  JointRejection OnJointState(const v1::JointState& js, std::int64_t now_ns, int joint_stream = 0);
+  // That joint-state stream ended (its monotonic reference is dropped).
+  void CloseJointStream(int joint_stream);
 
   // --- ResetStop ---
   v1::ResetStopResponse OnReset(const v1::ResetStopRequest& r, bool authorized, std::int64_t now_ns);
@@ -119,6 +172,9 @@ class Core {
   [[nodiscard]] const std::string& last_protocol_error() const noexcept { return last_protocol_error_; }
   // Frame-to-stop latency of the newest STOP: now_ns when it latched minus the contact frame's t_ns; -1 none.
   [[nodiscard]] std::int64_t TakeStopLatencyNs() noexcept { return std::exchange(stop_latency_ns_, -1); }
+  // The events since the last call, oldest first: one log line each (the service logs them in one place).
+  [[nodiscard]] std::vector<Event> TakeEvents();
+  [[nodiscard]] std::uint64_t run_id() const noexcept { return setup_.run_id; }
 
  private:
   struct Stream {
@@ -135,6 +191,7 @@ class Core {
     v1::Heartbeat heartbeat;
     v1::PatchFault fault;
     bool in_contact = false;
+    bool doubtful = false;                // the newest contact was refused as a doubt: shown unplaced, not fused
     v1::BodyContact contact;              // the newest contact, placed when possible
     v1::PatchContact surface;             // the newest contact as the decoder sent it (patch frame)
   };
@@ -144,6 +201,11 @@ class Core {
   };
 
   Reply Refuse(Stream& s, v1::HelloRefusal reason, const std::string& message, std::int64_t now_ns);
+  // The scene's expectations of a hello (spec, model, rate, configuration): HELLO_REFUSAL_UNSPECIFIED when met.
+  v1::HelloRefusal CheckHello(std::size_t patch, const v1::PatchHello& h, std::string& message) const;
+  void Bad(BadInput b) noexcept { ++counters_.bad_input[static_cast<std::size_t>(b)]; }
+  safety::Rejection CheckContact(std::size_t patch, const v1::PatchMessage& m, std::int64_t now_ns) const;
+  void DrainPolicyEvents(const std::string& operator_name = {});
   Reply ProtocolError(int stream, Stream& s, const std::string& why, std::int64_t now_ns);
   void Note(const safety::Step& step);
   void JointsAt(std::int64_t t_ns, std::vector<double>& q) const;
@@ -157,7 +219,10 @@ class Core {
   std::map<int, Stream> streams_;
   int next_stream_ = 1;
   std::vector<PatchLink> links_;
-  std::deque<JointSample> joints_;
+  std::deque<JointSample> joints_;        // sorted by t_ns
+  std::int64_t joint_arrival_ns_ = -1;    // when the newest accepted joint state arrived (aggregator clock)
+  std::map<int, std::int64_t> joint_stream_last_t_ns_;  // the monotonic reference, per joint-state stream
+  std::vector<Event> events_;
   robot::Data fk_;
   std::optional<fusion::Fuser> fuser_;
   std::unique_ptr<fusion::FusionData> fusion_data_;  // fixed-size (about 29 kB): on the heap once

@@ -47,8 +47,10 @@ enum class CauseKind : std::uint8_t {
   kStartup = 7,           // the start-up latch (epoch 1): FAULT
   kShuttingDown = 8,      // Shutdown(): FAULT, never reset
   kInternal = 9,          // the caller fed something impossible (time backwards, an unknown patch): FAULT
+  kPatchLate = 10,        // a patch's messages arrived older than the freshness budget: FAULT (the channel layer's)
+  kLinkErrors = 11,       // too many errors on a link's safety layer within its window: FAULT (the channel layer's)
 };
-inline constexpr std::size_t kCauseKindCount = 10;
+inline constexpr std::size_t kCauseKindCount = 12;
 
 // ruffini.v1.ResetRefusal. kNone (RESET_REFUSAL_UNSPECIFIED) when accepted.
 enum class ResetRefusal : std::uint8_t {
@@ -60,8 +62,9 @@ enum class ResetRefusal : std::uint8_t {
   kUnauthorized = 5,          // ResetRequest.authorized is false
   kShuttingDown = 6,          // after Shutdown(): nothing is ever reset
   kInvalidRequest = 7,        // the request cannot be trusted (now_ns went backwards)
+  kWrongRun = 8,              // the request names another aggregator run (ResetRequest.other_run)
 };
-inline constexpr std::size_t kResetRefusalCount = 8;
+inline constexpr std::size_t kResetRefusalCount = 9;
 
 // ruffini.v1.LinkState. kHelloPending is the service's (a stream open, no hello yet): the policy never sets it.
 enum class LinkState : std::uint8_t {
@@ -88,8 +91,9 @@ enum class PatchFaultCode : std::uint8_t {
   kOverloaded = 8,
   kShuttingDown = 9,
   kInternal = 10,
+  kLate = 11,        // frames or messages waited past the freshness budget (or carry an implausible time)
 };
-inline constexpr std::size_t kPatchFaultCodeCount = 11;
+inline constexpr std::size_t kPatchFaultCodeCount = 12;
 
 // Why an event was refused as input. A refused event is never applied as it stands, and it is a doubt, never
 // a reason to clear: time going backwards latches FAULT (kInternal) whatever the event; otherwise a refused
@@ -103,18 +107,51 @@ enum class Rejection : std::uint8_t {
   kNonFiniteForce,  // a contact's force_n is NaN or infinite
   kNegativeForce,   // a contact's force_n is below 0 (the decoder clamps at 0: a broken decoder)
   kNotConnected,    // a heartbeat or contact from a patch whose hello is not accepted (or that went silent)
+  // Found by the caller (aggregate::Core) before the policy judges a contact, passed in Contact.doubt:
+  kBadPosition,     // a located contact whose position is not finite or lies off the patch (beyond the tolerance)
+  kBadCovariance,   // a located contact whose covariance is not finite or not positive semi-definite
+  kImplausibleTime, // a contact frame whose t_ns is further from its arrival than InputLimits.max_time_skew_ns
 };
-inline constexpr std::size_t kRejectionCount = 7;
+inline constexpr std::size_t kRejectionCount = 10;
 
 inline constexpr std::int32_t kNoPatch = -1;
 inline constexpr std::int32_t kNoRegion = -1;
 
 // --- Configuration (the scene's safety section; the scene loader fills it) ----------------------------------
 
+// When a contact cause ends (hysteresis): a contact that went above its threshold stays a present cause until
+// its force has stayed below threshold x (1 - fraction) for hold_ns (on the aggregator's clock), or the decoder
+// released it (a released frame, or a healthy heartbeat out of contact). A contact hovering at the threshold is
+// therefore one cause (one epoch), not one per crossing. It never delays a STOP: only the end of a cause.
+struct ContactRelease {
+  float fraction = 0.1f;                   // 0 <= fraction < 1
+  std::int64_t hold_ns = 100'000'000;      // 0 .. 60 s
+  std::string source;                      // why these numbers (the scene's `source:`; empty: the defaults)
+};
+
 struct RegionConfig {
   std::string name;         // e.g. "forearm"
   float threshold_n = 0;    // a contact above this stops (at or below never does); > 0 and finite
   std::string source;       // where the number comes from (FACTS.md: ISO/TS 15066 values vary by source)
+  ContactRelease release{};  // the scene's safety.contact_release, or the region's own `release:`
+};
+
+// What the aggregator checks of its input before the policy judges it (docs/safety.md, "Bad input"). The
+// policy uses negative_force_tolerance_n; aggregate::Core applies the rest.
+struct InputLimits {
+  // A force in [-tolerance, 0) is decoder noise around zero and is judged as 0 N; below -tolerance it is a
+  // doubt (Rejection::kNegativeForce: STOP).
+  float negative_force_tolerance_n = 0.05f;
+  // A contact frame's or joint state's t_ns further than this from its arrival (either way) is refused
+  // (frames: a doubt, STOP; joint states: rejected and counted, never used).
+  std::int64_t max_time_skew_ns = 2'000'000'000;
+  // A located position this far outside the spec's Y / R extents is off the patch (a doubt, STOP).
+  double position_tolerance_y_mm = 5.0;
+  double position_tolerance_r_deg = 5.0;
+  // Hello expectations (0 / empty: the scene states none, and nothing is checked).
+  double sample_rate_hz = 0;              // PatchHello.sample_rate_hz must match within 0.1 %
+  std::string decoder_config_sha256;      // PatchHello.decoder_config.config_sha256 must equal it
+  std::string source;                     // why these numbers (the scene's `source:` fields, joined)
 };
 
 struct PatchConfig {
@@ -136,6 +173,7 @@ struct Config {
   // false: a new cause while latched (same or lower severity) is recorded and keeps the epoch; only a new
   //   latch (CLEAR -> STOP/FAULT, the STOP -> FAULT escalation, Shutdown) takes epoch + 1.
   bool new_epoch_per_cause = true;
+  InputLimits input{};
 };
 
 // Throws InputError naming the field and the value: "safety.patches[2].id ('forearm') is a duplicate".
@@ -157,11 +195,15 @@ struct Contact {
   bool released = false;          // the frame that ends the contact
   std::int64_t t_ns = 0;          // when the frame was measured (interrogator clock); 0: now_ns
   std::optional<std::array<double, 3>> p_bc_m{};  // where on the body (base frame B, m), when placed
+  // The caller found the frame untrustworthy (kBadPosition, kBadCovariance, kImplausibleTime): refused as a
+  // doubt (STOP), counted under that rejection; p_bc_m is then ignored.
+  Rejection doubt = Rejection::kNone;
 };
 
 struct ResetRequest {
   std::uint64_t stop_epoch = 0;  // the epoch the operator saw
   bool authorized = false;        // the service checked the caller's identity (TLS client certificate)
+  bool other_run = false;         // the request names another aggregator run (or none): kWrongRun
 };
 
 // --- Outputs --------------------------------------------------------------------------------------------------
@@ -203,6 +245,9 @@ struct PatchState {
   bool protocol_fault = false;          // until the next accepted hello
   bool contact_over = false;            // a contact above threshold (or doubtful) and not released yet
   float contact_force_n = 0;            // the newest contact's force (NaN when it was NaN)
+  // While contact_over: since when the force has stayed below the region's release level (empty: it has
+  // not); the cause ends once this is ContactRelease.hold_ns old.
+  std::optional<std::int64_t> contact_below_since_t_ns{};
   bool operator==(const PatchState& o) const noexcept;  // NaN equals NaN, as for Cause
 };
 
@@ -218,8 +263,34 @@ struct Counters {
   std::array<std::uint64_t, kResetRefusalCount> resets_refused{};  // by ResetRefusal ([0] unused)
   std::array<std::uint64_t, kRejectionCount> rejections{};         // by Rejection ([0] unused)
   std::uint64_t publications = 0;  // seq increments (state changes and Publish)
+  std::uint64_t events_dropped = 0;  // events not taken before kEventCapacity more arrived
   bool operator==(const Counters&) const = default;
 };
+
+// A change worth one log line (docs/safety.md, "Events"): every latch, escalation, new epoch while latched,
+// shutdown and reset (accepted or refused). The Data keeps the newest kEventCapacity until the caller takes
+// them (Data::ClearEvents); older ones are counted in Counters.events_dropped, never blocking an event.
+enum class EventType : std::uint8_t {
+  kLatch,          // CLEAR -> STOP or FAULT (a new epoch)
+  kEscalation,     // STOP -> FAULT (a new epoch)
+  kNewEpoch,       // a new cause while latched took a new epoch (Config.new_epoch_per_cause)
+  kShutdown,       // FAULT shutting down (a new epoch)
+  kResetAccepted,  // -> CLEAR
+  kResetRefused,   // nothing changed; `reset_refusal` says why
+};
+std::string_view EventTypeName(EventType t) noexcept;
+
+struct Event {
+  EventType type = EventType::kLatch;
+  State state = State::kFault;         // the state after the event
+  std::uint64_t stop_epoch = 0;        // the epoch after the event
+  Cause cause{};                       // the cause latched (latches), or the cause that blocked a reset
+  ResetRefusal reset_refusal = ResetRefusal::kNone;
+  std::uint64_t reset_epoch = 0;       // resets: the epoch the request named
+  std::int64_t t_ns = 0;               // now_ns of the event
+  bool operator==(const Event&) const = default;
+};
+inline constexpr std::size_t kEventCapacity = 16;
 
 // What one event did.
 struct Step {
@@ -253,6 +324,9 @@ class Data {
   [[nodiscard]] std::optional<std::int64_t> joint_state_t_ns() const noexcept { return joint_last_ns_; }
   // The newest now_ns accepted: time never goes backwards below it.
   [[nodiscard]] std::int64_t now_ns() const noexcept { return now_ns_; }
+  // The events since the last ClearEvents (oldest first), for the caller's log.
+  [[nodiscard]] std::span<const Event> events() const noexcept { return {events_.data(), event_count_}; }
+  void ClearEvents() noexcept { event_count_ = 0; }
 
   bool operator==(const Data&) const = default;
 
@@ -267,6 +341,10 @@ class Data {
   bool shutting_down_ = false;
   bool dirty_ = false;            // the current event changed state_ (one seq per event)
   std::int64_t now_ns_ = 0;
+  Cause last_rejection_{};        // the newest refused input's cause, until a reset clears the latch
+  std::array<Event, kEventCapacity> events_{};
+  std::size_t event_count_ = 0;
+  void Record(const Event& e) noexcept;
 };
 
 // What the scene fixes. Immutable after construction.
@@ -309,7 +387,7 @@ class Policy {
   // published at the newest good time).
   Step Publish(Data& d, std::int64_t now_ns) const noexcept;
   // Clear the latch named by r.stop_epoch. Checks in this order: now_ns not backwards (kInvalidRequest),
-  // authorized, not shutting down, latched, the epoch, every cause gone (a patch past its deadline counts as
+  // authorized, this run (kWrongRun), not shutting down, latched, the epoch, every cause gone (a patch past its deadline counts as
   // silent), every patch healthy long enough. A refused reset changes nothing but the refusal counter; an
   // accepted one makes the state CLEAR (same epoch; the next latch takes epoch + 1).
   ResetResult Reset(Data& d, const ResetRequest& r, std::int64_t now_ns) const noexcept;
@@ -327,6 +405,8 @@ class Policy {
   Step Finish(Data& d, Step step) const noexcept;
   Step Refuse(Data& d, Rejection why, Cause cause, Severity severity) const noexcept;
   [[nodiscard]] Cause FirstCausePresent(const Data& d, std::int64_t now_ns) const noexcept;
+  [[nodiscard]] bool ContactPresent(const PatchState& p, std::size_t patch, std::int64_t now_ns) const noexcept;
+  [[nodiscard]] const ContactRelease& ReleaseOf(std::size_t patch) const noexcept;
 
   Config config_;
 };

@@ -11,7 +11,14 @@
 //     silence_deadline_ms: 30        # every patch's, unless its entry says otherwise (default 30)
 //     joint_state_max_age_ms: 50     # only in a scene with a robot (default 50)
 //     healthy_before_reset_ms: 200   # default 200
-//     new_epoch_per_cause: false     # Config::new_epoch_per_cause (default false)
+//     new_epoch_per_cause: true      # Config::new_epoch_per_cause (default true)
+//     # Optional, each with a required `source:` when written (defaults in policy.h):
+//     contact_release: {fraction: 0.1, hold_ms: 100, source: ...}  # every region's; a region may
+//                                    # override it with its own `release: {fraction, hold_ms, source}`
+//     negative_force_tolerance: {force_n: 0.05, source: ...}        # InputLimits
+//     time_skew: {max_ms: 2000, source: ...}                        # frames and joint states vs arrival
+//     position_tolerance: {y_mm: 5, r_deg: 5, source: ...}          # beyond the spec's extents
+//     decoders: {sample_rate_hz: 1000, config_sha256: ..., source: ...}  # hello expectations
 //
 // Times are written in ms and kept in ns. joint_states_required is true exactly when the scene names a robot.
 // Every region needs a `source:` (FACTS.md: ISO/TS 15066 values vary between sources, so a number carries
