@@ -1,5 +1,7 @@
 #include "server.h"
 
+#include "ruffini/channel/crc.h"
+
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -153,6 +155,9 @@ struct Stats {
   std::vector<std::string> patch_ids, patch_regions;
   std::unique_ptr<std::atomic<std::uint64_t>[]> contacts;   // contact onsets per patch
   std::unique_ptr<std::atomic<int>[]> link_state;            // per patch
+  // The safety layer's detections (docs/safety-channel.md): per patch (then one row for streams that never
+  // got a patch, "-"), per error.
+  std::unique_ptr<std::array<std::atomic<std::uint64_t>, channel::kErrorKinds>[]> link_errors;
   service::AtomicHistogram frame_to_stop;
 };
 
@@ -233,6 +238,22 @@ class StatsCollectable final : public prometheus::Collectable {
       }
       out.push_back(std::move(f));
       out.push_back(std::move(g));
+    }
+    {
+      MetricFamily f{"ruffini_aggregator_link_errors_total",
+                     "Communication errors the safety layer detected on the decoder links, by patch ('-': a stream "
+                     "refused before it had one) and reason (docs/safety-channel.md).",
+                     MetricType::Counter, {}};
+      for (std::size_t i = 0; i <= s_.patch_ids.size(); ++i) {
+        for (std::size_t e = 0; e < channel::kErrorKinds; ++e) {
+          ClientMetric m;
+          m.label = {{"patch", i < s_.patch_ids.size() ? s_.patch_ids[i] : "-"},
+                     {"reason", std::string(channel::Name(static_cast<channel::Error>(e)))}};
+          m.counter.value = u(s_.link_errors[i][e]);
+          f.metric.push_back(m);
+        }
+      }
+      out.push_back(std::move(f));
     }
     one("ruffini_aggregator_safety_subscribers", "WatchSafety streams open.", MetricType::Gauge, s_.safety_subscribers.load());
     one("ruffini_aggregator_contact_subscribers", "WatchContacts streams open.", MetricType::Gauge,
@@ -331,6 +352,7 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
   }
   void LogEvents();
   void PublishSafety();
+  v1::SafetyState SealedState(std::int64_t mono_ns) const;
   void PublishContacts();
   void CopyStats();
   // The caller's identity; true when its role is one of `allowed` (kAny, a plaintext server, always is).
@@ -594,7 +616,8 @@ grpc::ServerWriteReactor<v1::SafetyState>* AggregatorServer::Impl::WatchSafety(g
     safety_guards[r] = guard;
     stats.safety_subscribers = static_cast<int>(safety_subs.size());
     spdlog::info("safety subscriber {} ({} now)", who, safety_subs.size());
-    r->Offer(core->SafetyState(), service::MonoNowNs());  // the state in force at once
+    const std::int64_t mono = service::MonoNowNs();
+    r->Offer(SealedState(mono), mono);  // the state in force at once
   });
   return r;
 }
@@ -689,9 +712,17 @@ void AggregatorServer::Impl::LogEvents() {
   }
 }
 
+// The state as it goes on the wire: the safety layer's send time and CRC last (docs/safety-channel.md).
+v1::SafetyState AggregatorServer::Impl::SealedState(std::int64_t mono_ns) const {
+  v1::SafetyState s = core->SafetyState();
+  s.set_sender_steady_ns(mono_ns);
+  channel::Seal(s);
+  return s;
+}
+
 void AggregatorServer::Impl::PublishSafety() {
-  const v1::SafetyState s = core->SafetyState();
   const std::int64_t mono = service::MonoNowNs();
+  const v1::SafetyState s = SealedState(mono);
   for (auto* r : safety_subs) r->Offer(s, mono);
 }
 
@@ -716,6 +747,12 @@ void AggregatorServer::Impl::CopyStats() {
   for (auto v : c.hellos_refused) refused += v;
   stats.hellos_refused = refused;
   stats.protocol_errors = c.protocol_errors;
+  for (std::size_t i = 0; i <= stats.patch_ids.size(); ++i) {
+    const channel::ErrorCounts& ec = i < stats.patch_ids.size() ? core->link_errors()[i] : core->link_errors_unbound();
+    for (std::size_t e = 0; e < channel::kErrorKinds; ++e) {
+      stats.link_errors[i][e].store(ec.by_error[e], std::memory_order_relaxed);
+    }
+  }
   stats.auth_hello_other_patch = c.hellos_refused[v1::HELLO_REFUSAL_UNAUTHORIZED];
   stats.joint_accepted = c.joint_states[0];
   std::uint64_t rejected = 0;
@@ -803,6 +840,7 @@ AggregatorServer::AggregatorServer(ServerConfig config, aggregate::Setup setup) 
   }
   s.stats.contacts = std::make_unique<std::atomic<std::uint64_t>[]>(n);
   s.stats.link_state = std::make_unique<std::atomic<int>[]>(n);
+  s.stats.link_errors = std::make_unique<std::array<std::atomic<std::uint64_t>, channel::kErrorKinds>[]>(n + 1);
   s.was_in_contact.assign(n, false);
   s.core = std::make_unique<aggregate::Core>(std::move(setup), s.Now());
 

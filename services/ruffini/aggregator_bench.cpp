@@ -2,6 +2,10 @@
 // Every wait has a deadline; every process is stopped by pid (SIGTERM, then SIGKILL after a grace period).
 #include "aggregator_bench.h"
 
+#include "ruffini/channel/checkers.h"
+#include "ruffini/channel/crc.h"
+#include "ruffini/service/common.h"
+
 #include <arpa/inet.h>
 #include <grpcpp/grpcpp.h>
 #include <netinet/in.h>
@@ -355,7 +359,10 @@ class SyntheticDecoder final : public grpc::ClientBidiReactor<v1::PatchMessage, 
     if (!ok) return;
     {
       std::lock_guard lock(mu_);
-      if (in_.has_hello_accepted()) accepted_ = true;
+      if (in_.has_hello_accepted()) {
+        accepted_ = true;
+        aggregator_run_ = in_.hello_accepted().aggregator_run_id();
+      }
       if (in_.has_hello_refused()) refusal_ = in_.hello_refused().message();
     }
     StartRead(&in_);
@@ -374,6 +381,11 @@ class SyntheticDecoder final : public grpc::ClientBidiReactor<v1::PatchMessage, 
       return false;
     }
     m.set_seq(++seq_);
+    // The decoder's part of the safety layer (docs/safety-channel.md), stamped when the message is queued.
+    m.set_sender_run_id(run_id_);
+    m.set_sender_steady_ns(service::MonoNowNs());
+    m.set_aggregator_run_id(m.has_hello() ? 0 : aggregator_run_);
+    channel::Seal(m);
     queue_.push_back(std::move(m));
     if (!writing_) {
       writing_ = true;
@@ -391,6 +403,8 @@ class SyntheticDecoder final : public grpc::ClientBidiReactor<v1::PatchMessage, 
   bool writing_ = false, accepted_ = false, broken_ = false, onset_sent_ = false;
   std::string refusal_;
   std::uint64_t seq_ = 0, contacts_ = 0, heartbeats_ = 0, overflows_ = 0;
+  const std::uint64_t run_id_ = channel::DrawRunId();
+  std::uint64_t aggregator_run_ = 0;
   std::mutex done_mu_;
   std::condition_variable done_cv_;
   bool done_ = false;

@@ -12,6 +12,7 @@
 #include "ruffini/safety/scene.h"
 #include "ruffini/scene_file.h"
 #include "ruffini/twin/scene.h"
+#include "sealed.h"
 
 namespace {
 
@@ -62,7 +63,7 @@ class CoreTest : public ::testing::Test {
   // Opens a stream for patch i and sends its hello; returns the stream id.
   int Connect(std::size_t i, std::int64_t t) {
     const int s = core.OpenStream(t);
-    const auto r = core.OnPatchMessage(s, Hello(setup, i), t);
+    const auto r = ruffini::testing::Deliver(core, s, Hello(setup, i), t);
     EXPECT_TRUE(r.command && r.command->has_hello_accepted()) << (r.command ? r.command->DebugString() : "none");
     seq[s] = 1;
     return s;
@@ -70,7 +71,7 @@ class CoreTest : public ::testing::Test {
   aggregate::Core::Reply Send(int stream, std::size_t i, v1::PatchMessage m, std::int64_t t) {
     m.set_patch_id(setup.patches[i].id);
     m.set_seq(++seq[stream]);
-    return core.OnPatchMessage(stream, m, t);
+    return ruffini::testing::Deliver(core, stream, m, t);
   }
   aggregate::Core::Reply Heartbeat(int stream, std::size_t i, std::int64_t t, bool healthy = true) {
     v1::PatchMessage m;
@@ -151,7 +152,7 @@ TEST_F(CoreTest, StartsInFaultAndHellosAreChecked) {
     v1::PatchMessage m = Hello(setup, 0);
     row.edit(m);
     const int s = core.OpenStream(kT0);
-    const auto r = core.OnPatchMessage(s, m, kT0);
+    const auto r = ruffini::testing::Deliver(core, s, m, kT0);
     ASSERT_TRUE(r.command) << row.what;
     ASSERT_TRUE(r.command->has_hello_refused()) << row.what;
     EXPECT_EQ(r.command->hello_refused().reason(), row.expect) << row.what;
@@ -162,7 +163,7 @@ TEST_F(CoreTest, StartsInFaultAndHellosAreChecked) {
   // Accepted; a second live stream for the same patch is refused.
   const int first = Connect(0, kT0);
   const int second = core.OpenStream(kT0);
-  const auto dup = core.OnPatchMessage(second, Hello(setup, 0), kT0);
+  const auto dup = ruffini::testing::Deliver(core, second, Hello(setup, 0), kT0);
   ASSERT_TRUE(dup.command && dup.command->has_hello_refused());
   EXPECT_EQ(dup.command->hello_refused().reason(), v1::HELLO_REFUSAL_DUPLICATE_PATCH);
   (void)first;
@@ -175,7 +176,7 @@ TEST_F(CoreTest, AHelloForAnotherPatchThanTheCallersIsUnauthorizedAndChangesNoth
   const v1::SafetyState before = core.SafetyState();
   const auto status_before = core.Status(kT0 + kMs);
   const int impostor = core.OpenStream(kT0 + kMs, setup.patches[0].id);
-  const auto r = core.OnPatchMessage(impostor, Hello(setup, 1), kT0 + kMs);
+  const auto r = ruffini::testing::Deliver(core, impostor, Hello(setup, 1), kT0 + kMs);
   ASSERT_TRUE(r.command && r.command->has_hello_refused());
   EXPECT_EQ(r.command->hello_refused().reason(), v1::HELLO_REFUSAL_UNAUTHORIZED);
   EXPECT_NE(r.command->hello_refused().message().find("forearm_a"), std::string::npos);
@@ -189,7 +190,7 @@ TEST_F(CoreTest, AHelloForAnotherPatchThanTheCallersIsUnauthorizedAndChangesNoth
   EXPECT_EQ(status_after.patches(0).link_state(), status_before.patches(0).link_state());
   // The same caller publishing its own patch is accepted.
   const int own = core.OpenStream(kT0 + 2 * kMs, setup.patches[0].id);
-  const auto ok = core.OnPatchMessage(own, Hello(setup, 0), kT0 + 2 * kMs);
+  const auto ok = ruffini::testing::Deliver(core, own, Hello(setup, 0), kT0 + 2 * kMs);
   ASSERT_TRUE(ok.command && ok.command->has_hello_accepted()) << ok.command->DebugString();
   (void)live;
 }
@@ -201,7 +202,7 @@ TEST_F(CoreTest, ASeqBreakEndsTheStreamAndFaults) {
   m.mutable_heartbeat()->set_healthy(true);
   m.set_patch_id(setup.patches[0].id);
   m.set_seq(5);  // expected 2
-  const auto r = core.OnPatchMessage(streams[0], m, kT0 + kMs);
+  const auto r = ruffini::testing::Deliver(core, streams[0], m, kT0 + kMs);
   EXPECT_TRUE(r.close);
   EXPECT_FALSE(r.command);
   EXPECT_EQ(core.counters().protocol_errors, 1u);
@@ -336,7 +337,7 @@ TEST_F(CoreTest, ADuplicateHelloIsRefusedFirstAndChangesNothing) {
     if (std::string(what) == "other model") h.mutable_hello()->set_model_sha256("0badf00d");
     if (std::string(what) == "slow heartbeat") h.mutable_hello()->set_heartbeat_period_ns(50 * kMs);
     const int impostor = core.OpenStream(tc);
-    const auto r = core.OnPatchMessage(impostor, h, tc);
+    const auto r = ruffini::testing::Deliver(core, impostor, h, tc);
     ASSERT_TRUE(r.command && r.command->has_hello_refused()) << what;
     EXPECT_EQ(r.command->hello_refused().reason(), v1::HELLO_REFUSAL_DUPLICATE_PATCH) << what;
     EXPECT_TRUE(r.close);
@@ -380,7 +381,7 @@ TEST_F(CoreTest, ASilentStreamIsTakenOverByANewHello) {
   const std::int64_t watchdog = setup.safety.patches[2].silence_deadline_ns;  // 30 ms
   Beat(streams, 90, /*skip=*/2);  // upper_arm_a silent for 90 ms = 3 watchdogs: not yet past
   const int early = core.OpenStream(tc);
-  const auto r1 = core.OnPatchMessage(early, Hello(setup, 2), tc);
+  const auto r1 = ruffini::testing::Deliver(core, early, Hello(setup, 2), tc);
   ASSERT_TRUE(r1.command && r1.command->has_hello_refused());
   EXPECT_EQ(r1.command->hello_refused().reason(), v1::HELLO_REFUSAL_DUPLICATE_PATCH);
   core.CloseStream(early, tc);
@@ -390,7 +391,7 @@ TEST_F(CoreTest, ASilentStreamIsTakenOverByANewHello) {
   ASSERT_EQ(watchdog, 30 * kMs);
   const int fresh = core.OpenStream(tc);
   seq[fresh] = 1;
-  const auto r2 = core.OnPatchMessage(fresh, Hello(setup, 2), tc);
+  const auto r2 = ruffini::testing::Deliver(core, fresh, Hello(setup, 2), tc);
   ASSERT_TRUE(r2.command && r2.command->has_hello_accepted()) << r2.command->DebugString();
   EXPECT_EQ(r2.end_stream, streams[2]);
   EXPECT_EQ(core.counters().takeovers, 1u);
@@ -449,13 +450,13 @@ TEST_F(CoreTest, BadContactsAreDoubtsNeverNaNAndNeverVanish) {
     std::int64_t now = kT0;
     for (std::size_t i = 0; i < setup.patches.size(); ++i) {
       st.push_back(c.OpenStream(now));
-      ASSERT_TRUE(c.OnPatchMessage(st.back(), Hello(setup, i), now).command->has_hello_accepted());
+      ASSERT_TRUE(ruffini::testing::Deliver(c, st.back(), Hello(setup, i), now).command->has_hello_accepted());
       sq[st.back()] = 1;
     }
     auto send = [&](std::size_t i, v1::PatchMessage m) {
       m.set_patch_id(setup.patches[i].id);
       m.set_seq(++sq[st[i]]);
-      return c.OnPatchMessage(st[i], m, now);
+      return ruffini::testing::Deliver(c, st[i], m, now);
     };
     for (int k = 0; k < 30; ++k) {
       now += 10 * kMs;
@@ -555,7 +556,7 @@ TEST_F(CoreTest, NoJointStateYetIsAgeMinusOne) { EXPECT_EQ(core.Status(kT0).join
 // name; a ResetStop naming another run, or none, is refused WRONG_RUN and changes nothing else.
 TEST_F(CoreTest, RunIdentityIsPublishedAndResetsAreBoundToTheRun) {
   const int s0 = core.OpenStream(tc);
-  const auto hello = core.OnPatchMessage(s0, Hello(setup, 0), tc);
+  const auto hello = ruffini::testing::Deliver(core, s0, Hello(setup, 0), tc);
   ASSERT_TRUE(hello.command && hello.command->has_hello_accepted());
   EXPECT_EQ(hello.command->hello_accepted().aggregator_run_id(), kRunId);
   EXPECT_EQ(hello.command->hello_accepted().robot_name(), "cobot");
@@ -622,7 +623,7 @@ TEST_F(CoreTest, ContactSetTimeAndHelloExpectations) {
     m.mutable_hello()->set_sample_rate_hz(rate);
     m.mutable_hello()->mutable_decoder_config()->set_config_sha256(sha);
     const int s = c.OpenStream(kT0);
-    const auto r = c.OnPatchMessage(s, m, kT0);
+    const auto r = ruffini::testing::Deliver(c, s, m, kT0);
     c.CloseStream(s, kT0);
     return r.command->has_hello_accepted() ? v1::HELLO_REFUSAL_UNSPECIFIED : r.command->hello_refused().reason();
   };
@@ -663,6 +664,158 @@ TEST(CoreSetup, InconsistentSetupsAreRefused) {
   auto t = CobotSetup();
   t.patches[0].mount->link = "hand_link";
   EXPECT_THROW(aggregate::Core(t, kT0), InputError);
+}
+
+}  // namespace
+
+// ---- The safety layer on the decoder links (docs/safety-channel.md): each of the eight errors, as the Core
+// sees it, with its stated reaction. Starts from CLEAR with every patch healthy.
+namespace {
+
+class CoreSafetyLayer : public CoreTest {
+ protected:
+  void SetUp() override {
+    streams = ClearAll();
+    ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+    epoch = core.SafetyState().stop_epoch();
+  }
+  // A heartbeat for patch 0 with the next seq, sealed at `sent` (the decoder's clock) and delivered at tc.
+  v1::PatchMessage Next(std::int64_t sent) {
+    v1::PatchMessage m;
+    m.set_patch_id(setup.patches[0].id);
+    m.set_seq(++seq[streams[0]]);
+    m.mutable_heartbeat()->set_healthy(true);
+    ruffini::testing::SealAsDecoder(m, core.run_id(), sent);
+    return m;
+  }
+  aggregate::Core::Reply Raw(const v1::PatchMessage& m) { return core.OnPatchMessage(streams[0], m, tc); }
+  std::uint64_t Errors(channel::Error e) const { return core.link_errors()[0][e]; }
+  bool StillClear() const {
+    const auto st = core.SafetyState();
+    return st.state() == v1::SafetyState::STATE_CLEAR && st.stop_epoch() == epoch;
+  }
+  std::vector<int> streams;
+  std::uint64_t epoch = 0;
+};
+
+TEST_F(CoreSafetyLayer, CorruptionIsDiscardedAndTheGapItLeavesFaultsThePatch) {
+  tc += kMs;
+  v1::PatchMessage m = Next(tc);
+  m.mutable_heartbeat()->set_healthy(false);  // flipped after sealing
+  const auto r = Raw(m);
+  EXPECT_FALSE(r.close);
+  EXPECT_EQ(Errors(channel::Error::kCorruption), 1u);
+  EXPECT_TRUE(StillClear()) << "the corrupted content (unhealthy) was not believed";
+  tc += kMs;
+  const auto r2 = Raw(Next(tc));  // its seq is one past the discarded one: a loss
+  EXPECT_TRUE(r2.close);
+  EXPECT_EQ(Errors(channel::Error::kLoss), 1u);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_FAULT);
+  EXPECT_EQ(core.SafetyState().cause().kind(), v1::SafetyCause::KIND_LINK_ERRORS) << "two errors within the window";
+}
+
+TEST_F(CoreSafetyLayer, ALossUsesTheMessageThenFaults) {
+  seq[streams[0]] += 3;  // three messages lost on the way
+  tc += kMs;
+  v1::PatchMessage m;
+  m.set_patch_id(setup.patches[0].id);
+  m.set_seq(++seq[streams[0]]);
+  m.set_t_ns(tc);
+  m.mutable_contact()->set_force_n(3.0f);
+  m.mutable_contact()->set_onset(true);
+  ruffini::testing::SealAsDecoder(m, core.run_id(), tc);
+  const auto r = Raw(m);
+  EXPECT_TRUE(r.close) << "the stream ends: the decoder reconnects with a fresh hello";
+  EXPECT_EQ(Errors(channel::Error::kLoss), 1u);
+  // The contact was used (a STOP), then the link's fault escalated it to FAULT.
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_FAULT);
+  EXPECT_EQ(core.SafetyState().cause().kind(), v1::SafetyCause::KIND_PATCH_PROTOCOL);
+  EXPECT_GE(core.safety_counters().stops, 1u);
+}
+
+TEST_F(CoreSafetyLayer, RepetitionAndIncorrectSequenceAreDiscardedThenTheErrorRateLatches) {
+  tc += kMs;
+  const v1::PatchMessage m = Next(tc);
+  EXPECT_FALSE(Raw(m).close);
+  EXPECT_FALSE(Raw(m).close) << "the same message again";
+  EXPECT_EQ(Errors(channel::Error::kRepetition), 1u);
+  EXPECT_TRUE(StillClear());
+  tc += kMs;
+  const v1::PatchMessage a = Next(tc);
+  const v1::PatchMessage b = Next(tc);
+  EXPECT_TRUE(Raw(b).close) << "b came first: a gap (a's seq) is a loss, and the second error in the window";
+  EXPECT_EQ(core.SafetyState().cause().kind(), v1::SafetyCause::KIND_LINK_ERRORS);
+  EXPECT_TRUE(Raw(a).close) << "the stream is over";
+}
+
+TEST_F(CoreSafetyLayer, AnOlderSeqIsAnIncorrectSequence) {
+  tc += kMs;
+  const v1::PatchMessage a = Next(tc);
+  const v1::PatchMessage b = Next(tc);
+  EXPECT_FALSE(Raw(a).close);
+  EXPECT_FALSE(Raw(b).close);
+  EXPECT_FALSE(Raw(a).close);
+  EXPECT_EQ(Errors(channel::Error::kIncorrectSequence), 1u);
+  EXPECT_TRUE(StillClear());
+}
+
+TEST_F(CoreSafetyLayer, DelayUsesTheMessageThenFaultsLate) {
+  // The decoder's clock runs with the test's; a message sent 25 ms before it arrives is 25 ms old.
+  tc += kMs;
+  v1::PatchMessage m;
+  m.set_patch_id(setup.patches[0].id);
+  m.set_seq(++seq[streams[0]]);
+  m.set_t_ns(tc - 25 * kMs);
+  m.mutable_contact()->set_force_n(3.0f);
+  m.mutable_contact()->set_onset(true);
+  ruffini::testing::SealAsDecoder(m, core.run_id(), tc - 25 * kMs);
+  const auto r = Raw(m);
+  EXPECT_TRUE(r.close);
+  EXPECT_EQ(Errors(channel::Error::kDelay), 1u);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_FAULT);
+  EXPECT_EQ(core.SafetyState().cause().kind(), v1::SafetyCause::KIND_PATCH_LATE);
+  EXPECT_GE(core.safety_counters().stops, 1u) << "the late STOP still stopped first";
+}
+
+TEST_F(CoreSafetyLayer, InsertionMasqueradeAndAddressingAreDiscarded) {
+  struct Row {
+    channel::Error error;
+    std::function<void(v1::PatchMessage&)> forge;
+  };
+  const std::vector<Row> rows = {
+      {channel::Error::kInsertion, [](v1::PatchMessage& m) { m.set_sender_run_id(0xBAD); }},
+      {channel::Error::kMasquerade, [&](v1::PatchMessage& m) { m.set_patch_id(setup.patches[1].id); }},
+      {channel::Error::kAddressing, [&](v1::PatchMessage& m) { m.set_aggregator_run_id(core.run_id() + 1); }},
+  };
+  for (const Row& row : rows) {
+    SCOPED_TRACE(std::string(channel::Name(row.error)));
+    tc += 10 * kMs;
+    v1::PatchMessage forged = Next(tc);
+    --seq[streams[0]];  // it takes the place of the next genuine message
+    row.forge(forged);
+    channel::Seal(forged);  // a well-formed forgery: the CRC matches
+    forged.mutable_heartbeat()->set_healthy(false);
+    channel::Seal(forged);
+    EXPECT_FALSE(Raw(forged).close);
+    EXPECT_EQ(Errors(row.error), 1u);
+    EXPECT_TRUE(StillClear()) << "the forged unhealthy heartbeat was not believed";
+    EXPECT_FALSE(Raw(Next(tc)).close) << "the genuine stream goes on";
+    Beat(streams, 61'000);  // healthy for longer than the error-rate window before the next row
+    ASSERT_TRUE(StillClear());
+  }
+  EXPECT_EQ(core.link_errors()[1].total(), 0u) << "the masquerade counts on the stream's own patch";
+}
+
+TEST_F(CoreSafetyLayer, ACorruptedHelloIsRefused) {
+  const int s = core.OpenStream(tc);
+  v1::PatchMessage h = Hello(setup, 0);
+  ruffini::testing::SealAsDecoder(h, core.run_id(), tc);
+  h.mutable_hello()->set_model_sha256("abd");
+  const auto r = core.OnPatchMessage(s, h, tc);
+  ASSERT_TRUE(r.command && r.command->has_hello_refused());
+  EXPECT_EQ(r.command->hello_refused().reason(), v1::HELLO_REFUSAL_PROTOCOL_ERROR);
+  EXPECT_EQ(core.link_errors_unbound()[channel::Error::kCorruption], 1u);
+  EXPECT_TRUE(StillClear()) << "the live stream of that patch is untouched";
 }
 
 }  // namespace

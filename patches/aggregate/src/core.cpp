@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "ruffini/error.h"
 
@@ -74,6 +75,15 @@ Core::Core(Setup setup, std::int64_t now_ns)
     }
   }
   if (setup_.run_id == 0) throw InputError("aggregator setup: the run id must be nonzero (drawn at start)");
+  link_config_.freshness.budget_ns = setup_.safety.link.freshness_budget_ns;
+  link_config_.error_rate.window_ns = setup_.safety.link.error_window_ns;
+  link_config_.error_rate.limit = setup_.safety.link.error_limit;
+  try {
+    (void)channel::PatchLinkCheck(link_config_, setup_.run_id, "validate");
+  } catch (const std::invalid_argument& e) {
+    throw InputError(std::string("aggregator setup: safety.link_layer: ") + e.what());
+  }
+  link_errors_.resize(setup_.patches.size());
   links_.resize(setup_.patches.size());
   if (setup_.robot) {
     q_scratch_.resize(setup_.robot->num_dof());
@@ -146,9 +156,10 @@ Core::Reply Core::Refuse(Stream& s, v1::HelloRefusal reason, const std::string& 
   return r;
 }
 
-Core::Reply Core::ProtocolError(int /*stream*/, Stream& s, const std::string& why, std::int64_t now_ns) {
+Core::Reply Core::ProtocolError(int /*stream*/, Stream& s, const std::string& why, std::int64_t now_ns,
+                                safety::CauseKind kind) {
   ++counters_.protocol_errors;
-  if (s.patch >= 0) Note(policy_.OnProtocolError(data_, policy_.patch_id(s.patch), now_ns));
+  if (s.patch >= 0) Note(policy_.OnProtocolError(data_, policy_.patch_id(s.patch), now_ns, kind));
   last_protocol_error_ = why;
   Reply r;
   r.close = true;
@@ -212,11 +223,55 @@ safety::Rejection Core::CheckContact(std::size_t patch, const v1::PatchMessage& 
   return safety::Rejection::kNone;
 }
 
+void Core::CountLinkError(const Stream& s, channel::Error e) noexcept {
+  if (s.patch >= 0) link_errors_[static_cast<std::size_t>(s.patch)].Count(e);
+  else link_errors_unbound_.Count(e);
+}
+
 Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int64_t now_ns) {
   ++counters_.messages;
   auto it = streams_.find(stream);
   if (it == streams_.end()) return Reply{std::nullopt, true};
   Stream& s = it->second;
+  if (s.hello_done && s.patch < 0) return Reply{std::nullopt, true};  // refused earlier: nothing more is read
+
+  // The safety layer first (docs/safety-channel.md): integrity, identity, addressee, sequence, freshness.
+  // The stream's first message fixes the patch id it may speak for.
+  if (!s.check) s.check.emplace(link_config_, setup_.run_id, m.patch_id());
+  const channel::Verdict v = s.check->Receive(m, now_ns);
+  if (v.error) {
+    // The checker counted it per stream; the Core keeps the per-patch totals the metrics show.
+    CountLinkError(s, v.kind);
+  }
+  if (!v.use) {
+    const std::string what = "the safety layer discarded a message: " + std::string(channel::Name(v.kind));
+    if (!s.hello_done) return Refuse(s, v1::HELLO_REFUSAL_PROTOCOL_ERROR, what, now_ns);
+    if (v.latch) {
+      return ProtocolError(stream, s, what + ", the second error within the window", now_ns,
+                           safety::CauseKind::kLinkErrors);
+    }
+    return {};  // discarded: the stream goes on (a gap it left is a loss at the next message)
+  }
+  Reply out = Judge(stream, s, m, now_ns);
+  if (v.latch && !out.close && s.patch >= 0) {
+    // The content was used (it may be the STOP); now the link answers for what it did.
+    const safety::CauseKind kind = v.rate_latch              ? safety::CauseKind::kLinkErrors
+                                   : v.kind == channel::Error::kDelay ? safety::CauseKind::kPatchLate
+                                                                      : safety::CauseKind::kPatchProtocol;
+    const std::string why = v.kind == channel::Error::kDelay
+                                ? "a message arrived " + std::to_string(v.age_ns / 1'000'000) + " ms late (budget " +
+                                      std::to_string(link_config_.freshness.budget_ns / 1'000'000) + " ms)"
+                                : "the safety layer detected " + std::string(channel::Name(v.kind)) +
+                                      " (" + std::to_string(s.check->counts()[v.kind]) + " on this stream)";
+    Reply fault = ProtocolError(stream, s, why, now_ns, kind);
+    fault.command = std::move(out.command);
+    fault.end_stream = out.end_stream;
+    return fault;
+  }
+  return out;
+}
+
+Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::int64_t now_ns) {
 
   if (!s.hello_done) {
     // The first message: a hello, seq 1, the envelope's id = the scene's patch.
@@ -305,7 +360,9 @@ Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int
   const std::size_t pi = static_cast<std::size_t>(s.patch);
   PatchLink& link = links_[pi];
   const std::string_view id = policy_.patch_id(s.patch);
-  if (m.seq() != s.seq + 1 || m.patch_id() != id) {
+  // The safety layer has checked seq (a repeat or an older one never gets here; a gap does, as a loss the
+  // caller latches after this message is used) and the patch id (a masquerade never gets here).
+  if (m.seq() <= s.seq || m.patch_id() != id) {
     return ProtocolError(stream, s, "seq or patch id broken", now_ns);
   }
   s.seq = m.seq();

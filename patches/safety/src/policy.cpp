@@ -30,7 +30,7 @@ bool Cause::operator==(const Cause& o) const noexcept {
 bool PatchState::operator==(const PatchState& o) const noexcept {
   return link == o.link && ever_connected == o.ever_connected && last_seen_t_ns == o.last_seen_t_ns &&
          healthy_since_t_ns == o.healthy_since_t_ns && fault_in_force == o.fault_in_force && fault == o.fault &&
-         protocol_fault == o.protocol_fault && contact_over == o.contact_over &&
+         protocol_fault == o.protocol_fault && protocol_kind == o.protocol_kind && contact_over == o.contact_over &&
          SameForce(contact_force_n, o.contact_force_n) && contact_below_since_t_ns == o.contact_below_since_t_ns;
 }
 
@@ -424,16 +424,19 @@ Step Policy::OnPatchFault(Data& d, std::string_view patch_id, PatchFaultCode cod
   return Finish(d, {});
 }
 
-Step Policy::OnProtocolError(Data& d, std::string_view patch_id, std::int64_t now_ns) const noexcept {
+Step Policy::OnProtocolError(Data& d, std::string_view patch_id, std::int64_t now_ns,
+                             CauseKind kind) const noexcept {
   if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
   const std::int32_t i = FindPatch(patch_id);
   if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
+  if (kind != CauseKind::kPatchLate && kind != CauseKind::kLinkErrors) kind = CauseKind::kPatchProtocol;
   PatchState& p = d.patches_[static_cast<std::size_t>(i)];
-  const bool is_new = !p.protocol_fault;
+  const bool is_new = !p.protocol_fault || p.protocol_kind != kind;
   p.protocol_fault = true;
+  p.protocol_kind = kind;
   if (Live(p.link)) p.link = LinkState::kUnhealthy;
   p.healthy_since_t_ns.reset();
-  Latch(d, Cause{.kind = CauseKind::kPatchProtocol, .patch = i, .t_ns = now_ns}, Severity::kFault, is_new);
+  Latch(d, Cause{.kind = kind, .patch = i, .t_ns = now_ns}, Severity::kFault, is_new);
   return Finish(d, {});
 }
 
@@ -507,7 +510,7 @@ Cause Policy::FirstCausePresent(const Data& d, std::int64_t now_ns) const noexce
         now_ns - p.last_seen_t_ns > config_.patches[k].silence_deadline_ns) {
       return {.kind = CauseKind::kPatchSilent, .patch = i, .t_ns = now_ns};
     }
-    if (p.protocol_fault) return {.kind = CauseKind::kPatchProtocol, .patch = i, .t_ns = now_ns};
+    if (p.protocol_fault) return {.kind = p.protocol_kind, .patch = i, .t_ns = now_ns};
     if (p.fault_in_force) {
       return {.kind = CauseKind::kPatchFault, .patch = i, .patch_fault = p.fault, .t_ns = now_ns};
     }

@@ -115,6 +115,16 @@ Config ConfigFromScene(const SceneFile& scene) {
     m->Finish();
   }
   in.source = sources;
+  if (auto m = s.MapOr("link_layer")) {
+    Config::LinkLayer& l = c.link;
+    l.freshness_budget_ns = ToNs(m->NumberOr("freshness_budget_ms", ToMs(l.freshness_budget_ns), 0.1, kMaxDeadlineMs));
+    l.error_window_ns = ToNs(1000.0 * m->NumberOr("error_window_s", static_cast<double>(l.error_window_ns) / 1e9, 0.001, 86'400.0));
+    const double limit = m->NumberOr("error_limit", l.error_limit, 1.0, 8.0);
+    if (limit != std::floor(limit)) m->Fail("error_limit", "must be a whole number of errors (1 to 8)");
+    l.error_limit = static_cast<int>(limit);
+    l.source = Source(*m, "these budgets");
+    m->Finish();
+  }
   s.Finish();
 
   for (const SceneFilePatch& p : scene.patches) {

@@ -32,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "ruffini/channel/checkers.h"
 #include "ruffini/fusion/fuser.h"
 #include "ruffini/robot/kinematics.h"
 #include "ruffini/robot/model.h"
@@ -175,6 +176,10 @@ class Core {
   // The events since the last call, oldest first: one log line each (the service logs them in one place).
   [[nodiscard]] std::vector<Event> TakeEvents();
   [[nodiscard]] std::uint64_t run_id() const noexcept { return setup_.run_id; }
+  // The safety layer's detections on the decoder links, by patch (scene order) and by error; a stream that
+  // never got a patch counts under `unbound` (a corrupted or forged first message).
+  [[nodiscard]] const std::vector<channel::ErrorCounts>& link_errors() const noexcept { return link_errors_; }
+  [[nodiscard]] const channel::ErrorCounts& link_errors_unbound() const noexcept { return link_errors_unbound_; }
 
  private:
   struct Stream {
@@ -182,6 +187,9 @@ class Core {
     std::string allowed_patch;  // empty: any
     std::uint64_t seq = 0;
     bool hello_done = false;
+    // The safety layer's receiver (docs/safety-channel.md), made at the stream's first message for the patch
+    // id it names: every message passes it before anything in it is believed.
+    std::optional<channel::PatchLinkCheck> check;
   };
   struct PatchLink {
     int stream = -1;                      // the live stream holding the patch
@@ -206,13 +214,20 @@ class Core {
   void Bad(BadInput b) noexcept { ++counters_.bad_input[static_cast<std::size_t>(b)]; }
   safety::Rejection CheckContact(std::size_t patch, const v1::PatchMessage& m, std::int64_t now_ns) const;
   void DrainPolicyEvents(const std::string& operator_name = {});
-  Reply ProtocolError(int stream, Stream& s, const std::string& why, std::int64_t now_ns);
+  Reply ProtocolError(int stream, Stream& s, const std::string& why, std::int64_t now_ns,
+                      safety::CauseKind kind = safety::CauseKind::kPatchProtocol);
+  void CountLinkError(const Stream& s, channel::Error e) noexcept;
+  // The message's content, after the safety layer let it through.
+  Reply Judge(int stream, Stream& s, const v1::PatchMessage& m, std::int64_t now_ns);
   void Note(const safety::Step& step);
   void JointsAt(std::int64_t t_ns, std::vector<double>& q) const;
   bool PlaceContact(int patch, std::int64_t t_ns, const v1::PatchContact& c, v1::BodyContact& out);
   v1::AggregatorCommand Command(std::int64_t now_ns);
 
   Setup setup_;
+  channel::LinkConfig link_config_;
+  std::vector<channel::ErrorCounts> link_errors_;
+  channel::ErrorCounts link_errors_unbound_;
   safety::Policy policy_;
   safety::Data data_;
   std::int64_t start_ns_;

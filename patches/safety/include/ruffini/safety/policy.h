@@ -174,6 +174,13 @@ struct Config {
   //   latch (CLEAR -> STOP/FAULT, the STOP -> FAULT escalation, Shutdown) takes epoch + 1.
   bool new_epoch_per_cause = true;
   InputLimits input{};
+  // The safety layer on the decoder links (docs/safety-channel.md; the scene's `link_layer`).
+  struct LinkLayer {
+    std::int64_t freshness_budget_ns = 20'000'000;  // a patch message older than this: FAULT kPatchLate
+    std::int64_t error_window_ns = 60'000'000'000;  // the error-rate rule's window ...
+    int error_limit = 2;                            // ... and how many errors in it latch FAULT kLinkErrors
+    std::string source;                             // the scene's `source:` (empty: these defaults)
+  } link{};
 };
 
 // Throws InputError naming the field and the value: "safety.patches[2].id ('forearm') is a duplicate".
@@ -243,6 +250,7 @@ struct PatchState {
   bool fault_in_force = false;          // a PatchFault or an unhealthy heartbeat, until a healthy heartbeat
   PatchFaultCode fault = PatchFaultCode::kUnspecified;  // the newest fault code
   bool protocol_fault = false;          // until the next accepted hello
+  CauseKind protocol_kind = CauseKind::kPatchProtocol;  // which: protocol, late, or link errors
   bool contact_over = false;            // a contact above threshold (or doubtful) and not released yet
   float contact_force_n = 0;            // the newest contact's force (NaN when it was NaN)
   // While contact_over: since when the force has stayed below the region's release level (empty: it has
@@ -374,8 +382,10 @@ class Policy {
   Step OnContact(Data& d, std::string_view patch_id, const Contact& c, std::int64_t now_ns) const noexcept;
   // FAULT kPatchFault; the fault is in force until a healthy heartbeat.
   Step OnPatchFault(Data& d, std::string_view patch_id, PatchFaultCode code, std::int64_t now_ns) const noexcept;
-  // FAULT kPatchProtocol; in force until the next accepted hello.
-  Step OnProtocolError(Data& d, std::string_view patch_id, std::int64_t now_ns) const noexcept;
+  // FAULT kPatchProtocol (or the safety layer's kPatchLate / kLinkErrors, as `kind` says); in force until the
+  // next accepted hello.
+  Step OnProtocolError(Data& d, std::string_view patch_id, std::int64_t now_ns,
+                       CauseKind kind = CauseKind::kPatchProtocol) const noexcept;
   // The patch's stream ended: FAULT kPatchSilent.
   Step OnDisconnect(Data& d, std::string_view patch_id, std::int64_t now_ns) const noexcept;
   // An accepted joint state arrived (staleness is measured by arrival, on the aggregator's clock).
