@@ -165,9 +165,10 @@ SafetyMonitor::Action SafetyMonitor::OnState(const v1::SafetyState& s, SteadyClo
   const bool new_run = have_run_ && run != run_;
   const nanoseconds gap = std::chrono::duration_cast<nanoseconds>(now - last_evidence_);
   if (stream_has_state_) stats_.max_state_gap = std::max(stats_.max_state_gap, gap);
-  // A clean state follows the one before it (or the stream's start) within the watchdog: a late one starts
-  // the streak again, whether or not a watchdog tick saw the silence.
-  if (gap > config_.heartbeat_timeout) clear_streak_ = 0;
+  // A clean state follows the one before it (or the stream's start) within the watchdog: a late one means a
+  // silence, whether or not a watchdog tick saw it (a starved watchdog thread): halt and start the streak again.
+  const bool late = gap > config_.heartbeat_timeout;
+  if (late) clear_streak_ = 0;
   if (have_run_ && !new_run && s.seq() > stats_.last_state.seq() + 1) {
     stats_.skipped_states += s.seq() - stats_.last_state.seq() - 1;
   }
@@ -181,19 +182,27 @@ SafetyMonitor::Action SafetyMonitor::OnState(const v1::SafetyState& s, SteadyClo
   stream_has_state_ = true;
   last_evidence_ = now;
 
+  Action a = OnAcceptedState(s, new_run, new_epoch, late, now);
+  // A decision on the state itself says more than the silence before it; else the silence is told (one
+  // decision per event, as the callbacks see them).
+  if (a.kind == Action::Kind::kNone && late) return OnSilence(gap, now);
+  return a;
+}
+
+SafetyMonitor::Action SafetyMonitor::OnAcceptedState(const v1::SafetyState& s, bool new_run, bool new_epoch,
+                                                     bool late, SteadyClock::time_point now) {
   switch (s.state()) {
     case v1::SafetyState::STATE_CLEAR: {
-      if (new_run) {
-        Action a = Halt(HaltReason::kNewRun,
-                        "CLEAR from a new aggregator run (restarted, or another aggregator): clean states again", now);
-        clear_streak_ = std::min(1, config_.states_before_clear - 1);  // this CLEAR is the new run's first
-        return a;
+      if (new_run) {  // the streak starts after it: three clean states of the new run
+        return Halt(HaltReason::kNewRun,
+                    "CLEAR from a new aggregator run (restarted, or another aggregator): clean states again", now);
       }
       if (new_epoch) {
         return Halt(HaltReason::kMissedStop,
                     "CLEAR with a new stop_epoch: a stop and its reset happened in states not received", now);
       }
       if (!halted_) return {};
+      if (late) return {};  // it ends a silence: not within the watchdog of the state before, so not clean
       if (++clear_streak_ < config_.states_before_clear) return {};
       Action a;
       a.kind = Action::Kind::kClear;

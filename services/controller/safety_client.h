@@ -166,6 +166,8 @@ class SafetyMonitor {
     bool operator==(const Run&) const = default;
   };
   static Run RunOf(const ruffini::v1::SafetyState& s) { return {s.aggregator_run_id(), s.aggregator_start_t_ns()}; }
+  Action OnAcceptedState(const ruffini::v1::SafetyState& s, bool new_run, bool new_epoch, bool late,
+                         SteadyClock::time_point now);
   Action Halt(HaltReason reason, std::string detail, SteadyClock::time_point now,
               std::chrono::nanoseconds silence = std::chrono::nanoseconds(0),
               const ruffini::v1::SafetyState* state = nullptr);

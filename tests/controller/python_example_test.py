@@ -66,8 +66,9 @@ for i in range(6):  # CLEARs one second apart, the watchdog ticking in between
     m.on_tick(t + 0.031)
 check(not released and m.halted, "monitor: after a watchdog halt, CLEARs a second apart never release")
 t += 1.0
-events = [m.on_state(state(), t + k * 0.010) for k in range(3)]
-check(events[2] is not None and events[2][0] == "CLEAR", "monitor: then three within the watchdog release")
+events = [m.on_state(state(), t + k * 0.010) for k in range(4)]
+check(events[2] is None and events[3] is not None and events[3][0] == "CLEAR",
+      "monitor: then three within the watchdog after the late one release")
 
 m = watch_safety.Monitor("cobot", 0.030, now=0.0)
 m.on_stream_opened(0.0)
@@ -76,7 +77,9 @@ e = m.on_state(state(run=2), t + 0.010)
 check(e is not None and e[1] == "NEW_RUN", "monitor: a CLEAR of a new run halts")
 e2 = m.on_state(state(run=2), t + 0.020)
 e3 = m.on_state(state(run=2), t + 0.030)
-check(e2 is None and e3 is not None and e3[0] == "CLEAR", "monitor: released by the new run's third clean state")
+e4 = m.on_state(state(run=2), t + 0.040)
+check(e2 is None and e3 is None and e4 is not None and e4[0] == "CLEAR",
+      "monitor: released by three clean states of the new run after the halt")
 
 m = watch_safety.Monitor("cobot", 0.030, now=0.0)
 m.on_stream_opened(0.0)

@@ -130,12 +130,13 @@ TEST(SafetyMonitor, SilenceLongerThan30MsHaltsOnceThenAStateChangesTheReason) {
   EXPECT_EQ(a.halt.silence, 30ms + 1ns);
   EXPECT_EQ(a.halt.detail, "no state for 30.0 ms (limit 30.0 ms)");
   EXPECT_EQ(m.OnTick(t + 60ms).kind, Kind::kNone);  // once, not every tick
-  // Heartbeats again: CLEAR needs its streak on the live stream.
+  // Heartbeats again: CLEAR needs its streak on the live stream, after the state that ended the silence.
   t += 200ms;
   EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t).kind, Kind::kNone);
   EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 10ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kClear);
-  EXPECT_EQ(m.Stats(t + 20ms).max_state_gap, 200ms);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 30ms).kind, Kind::kClear);
+  EXPECT_EQ(m.Stats(t + 30ms).max_state_gap, 200ms);
 }
 
 TEST(SafetyMonitor, WhileHaltedForFaultSilenceIsReportedAndTheNextFaultIsToo) {
@@ -239,11 +240,12 @@ TEST(SafetyMonitor, AfterALinkHaltCleanStatesMustFollowEachOtherWithinTheWatchdo
     EXPECT_EQ(m.OnTick(t + 31ms).kind, Kind::kNone);  // told once
   }
   EXPECT_TRUE(m.halted());
-  // Then three within the watchdog: released.
+  // Then three within the watchdog after the late one: released.
   t += 1s;
   EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t).kind, Kind::kNone);
   EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 10ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kClear);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 30ms).kind, Kind::kClear);
 }
 
 // The same rule when no watchdog tick came in between (a starved watchdog thread): a late CLEAR starts the
@@ -255,9 +257,12 @@ TEST(SafetyMonitor, LateCleanStatesDoNotAddUpEvenWithoutAWatchdogTick) {
   auto t = ClearUp(m, kT0, 1, seq);
   EXPECT_EQ(m.OnState(State(kStop, 2, ++seq), t + 10ms).halt.reason, rc::HaltReason::kStop);
   t += 10ms;
-  for (int i = 0; i < 10; ++i) EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 31ms).kind, Kind::kNone) << i;
+  for (int i = 0; i < 10; ++i) EXPECT_NE(m.OnState(State(kClear, 2, ++seq), t += 31ms).kind, Kind::kClear) << i;
+  EXPECT_EQ(m.reason(), rc::HaltReason::kNoHeartbeat);  // the late state itself tells of the silence
+  // The late CLEAR is not clean itself; three more within the watchdog (30 ms exactly is within) release.
   EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kClear);  // 30 ms exactly is within
+  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kClear);
 }
 
 TEST(SafetyMonitor, AStateForAnotherRobotIsDiscardedCountedAndHalts) {
@@ -308,10 +313,12 @@ TEST(SafetyMonitor, ACleanStateFromANewRunHaltsUntilThreeCleanStatesOfThatRun) {
   const auto a = m.OnState(s, t += 10ms);
   ASSERT_EQ(a.kind, Kind::kHalt);
   EXPECT_EQ(a.halt.reason, rc::HaltReason::kNewRun);
+  for (int i = 0; i < 2; ++i) {
+    s.set_seq(++seq);
+    EXPECT_EQ(m.OnState(s, t += 10ms).kind, Kind::kNone);
+  }
   s.set_seq(++seq);
-  EXPECT_EQ(m.OnState(s, t += 10ms).kind, Kind::kNone);
-  s.set_seq(++seq);
-  EXPECT_EQ(m.OnState(s, t += 10ms).kind, Kind::kClear);  // the new run's third clean state
+  EXPECT_EQ(m.OnState(s, t += 10ms).kind, Kind::kClear);  // three clean states of the new run after the halt
   // Now the start time alone changes.
   s.set_aggregator_start_t_ns(s.aggregator_start_t_ns() + 1);
   s.set_stop_epoch(1);

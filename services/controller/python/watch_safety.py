@@ -92,21 +92,27 @@ class Monitor:
             return self._halt(reason, detail, now, s)
         run = self.run_of(s)
         new_run = self.run is not None and run != self.run
-        if now - self.last_evidence > self.timeout_s:
-            self.streak = 0  # late: a clean streak needs each state within the watchdog of the one before
+        gap = now - self.last_evidence
+        late = gap > self.timeout_s  # a silence even if no watchdog tick saw it
+        if late:
+            self.streak = 0
         if self.run is None or new_run:
             self.epoch = None  # a restarted aggregator counts epochs from 1 again
         new_epoch = self.epoch is not None and s.stop_epoch != self.epoch
         self.run, self.epoch, self.last_state = run, s.stop_epoch, s
         self.stream_has_state, self.last_evidence = True, now
+        event = self._on_accepted(s, new_run, new_epoch, late, now)
+        if event is None and late:  # one decision per event: the state's, else the silence's
+            return self._on_silence(gap, now)
+        return event
+
+    def _on_accepted(self, s, new_run, new_epoch, late, now):
         if s.state == CLEAR:
-            if new_run:
-                event = self._halt("NEW_RUN", "CLEAR from a new aggregator run: clean states again", now)
-                self.streak = min(1, self.n_clear - 1)  # this CLEAR is the new run's first
-                return event
+            if new_run:  # the streak starts after it: three clean states of the new run
+                return self._halt("NEW_RUN", "CLEAR from a new aggregator run: clean states again", now)
             if new_epoch:
                 return self._halt("MISSED_STOP", "CLEAR with a new stop_epoch: a stop and its reset were skipped", now)
-            if not self.halted:
+            if not self.halted or late:  # a CLEAR that ends a silence is not clean: the streak starts after it
                 return None
             self.streak += 1
             if self.streak < self.n_clear:
@@ -130,7 +136,9 @@ class Monitor:
         return now - self.last_evidence if self.stream_open else 0.0
 
     def on_tick(self, now):
-        silence = self.silence(now)
+        return self._on_silence(self.silence(now), now)
+
+    def _on_silence(self, silence, now):
         if not self.stream_open or silence <= self.timeout_s:
             return None
         self.streak = 0  # the three-clean-states rule holds after this silence too
