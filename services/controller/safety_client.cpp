@@ -420,8 +420,10 @@ void SafetyClient::ReadLoop() {
     {
       std::unique_lock lock(ctx_mu_);
       if (stop_cv_.wait_for(lock, config_.reconnect_initial, [this] { return stopping_.load(); })) break;
+      // A new channel connects on the call itself, after the whole pause (no channel state to wait on).
+      if (remake && stop_cv_.wait_until(lock, until, [this] { return stopping_.load(); })) break;
     }
-    if (remake) continue;  // a new channel connects on the call itself
+    if (remake) continue;
     while (!stopping_ && SteadyClock::now() < until) {
       const auto slice = std::min<SteadyClock::duration>(until - SteadyClock::now(), std::chrono::milliseconds(20));
       if (channel_->WaitForConnected(std::chrono::system_clock::now() + slice)) break;
