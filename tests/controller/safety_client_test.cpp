@@ -163,6 +163,22 @@ TEST(SafetyClient, AfterAFrozenLinkANewConnectionIsDialled) {
   EXPECT_LT(Ms(Clock::now() - stop_at), 1000.0);
 }
 
+// Finding 4: the ResetStop helper names the run as well as the epoch.
+TEST(SafetyClient, TheResetStopHelperNamesTheRunAndTheEpoch) {
+  rt::ScriptedAggregator agg("cobot", 0xabcdef0123456789ULL);
+  agg.Set(v1::SafetyState::STATE_STOP, 6);
+  auto stub = v1::Aggregator::NewStub(rc::MakeAggregatorChannel(agg.address()));
+  v1::ResetStopResponse response;
+  ASSERT_TRUE(rc::ResetStop(*stub, 0xabcdef0123456789ULL, 6, "test", "note", &response).ok());
+  EXPECT_TRUE(response.accepted());
+  EXPECT_EQ(agg.last_reset().aggregator_run_id(), 0xabcdef0123456789ULL);
+  EXPECT_EQ(agg.last_reset().stop_epoch(), 6u);
+  EXPECT_EQ(agg.last_reset().operator_name(), "test");
+  ASSERT_TRUE(rc::ResetStop(*stub, 0x1234, 6, "test", "", &response).ok());
+  EXPECT_FALSE(response.accepted());
+  EXPECT_EQ(response.reason(), v1::RESET_REFUSAL_WRONG_RUN);
+}
+
 // ruffini-controller against the scripted aggregator.
 
 std::string Base(const std::string& name) {

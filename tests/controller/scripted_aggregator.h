@@ -117,6 +117,26 @@ class ScriptedAggregator final : public v1::Aggregator::Service {
     return grpc::Status::OK;
   }
 
+  // Records the request; accepts it when it names this run and the current epoch, else refuses WRONG_RUN or
+  // WRONG_EPOCH.
+  grpc::Status ResetStop(grpc::ServerContext* /*ctx*/, const v1::ResetStopRequest* request,
+                         v1::ResetStopResponse* response) override {
+    std::lock_guard lock(mu_);
+    last_reset_ = *request;
+    if (request->aggregator_run_id() != run_id_) {
+      response->set_reason(v1::RESET_REFUSAL_WRONG_RUN);
+    } else if (request->stop_epoch() != state_.stop_epoch()) {
+      response->set_reason(v1::RESET_REFUSAL_WRONG_EPOCH);
+    } else {
+      response->set_accepted(true);
+    }
+    return grpc::Status::OK;
+  }
+  v1::ResetStopRequest last_reset() {
+    std::lock_guard lock(mu_);
+    return last_reset_;
+  }
+
   grpc::Status PublishJointStates(grpc::ServerContext* /*ctx*/, grpc::ServerReader<v1::JointState>* reader,
                                   v1::PublishJointStatesResponse* response) override {
     v1::JointState js;
@@ -133,6 +153,7 @@ class ScriptedAggregator final : public v1::Aggregator::Service {
   int port_ = 0;
   std::mutex mu_;
   v1::SafetyState state_;
+  v1::ResetStopRequest last_reset_;
   std::string robot_;
   std::uint64_t run_id_;
   std::uint64_t seq_ = 0;
