@@ -104,7 +104,8 @@ void RegisterResetCommand(CLI::App& app) {
         return;
       }
       epoch = status.safety().stop_epoch();
-      run_id = status.aggregator_run_id();
+      // The run of the state the operator sees (the status names it too).
+      run_id = status.safety().aggregator_run_id() != 0 ? status.safety().aggregator_run_id() : status.aggregator_run_id();
       std::printf("resetting %s (run %s)\n", StateText(status.safety()).c_str(), RunText(run_id).c_str());
     }
     std::fflush(stdout);
