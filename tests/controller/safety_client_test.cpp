@@ -59,22 +59,27 @@ struct Recorder {
   }
 };
 
-// Finding 8: the watchdog does not wait for a callback. The clear callback blocks for 1 s; the aggregator goes
-// silent right after the clear; halted() must turn true about 30 ms after the last state, and the NO_HEARTBEAT
-// callback comes after the clear callback returned (order kept). Before, the callbacks ran under the lock the
-// watchdog needed, so halted() stayed false for the whole second.
-TEST(SafetyClient, ACallbackThatBlocksForASecondDoesNotDelayTheWatchdog) {
+// Finding 8: the watchdog does not wait for a callback. The clear callback blocks for 2 s; the aggregator goes
+// silent right after the clear; halted() must turn true while that callback is still blocked (nominally 30 ms
+// after the last state: printed, not asserted, as a loaded machine can starve any thread), and the
+// NO_HEARTBEAT callback comes after the clear callback returned (order kept). Before, the callbacks ran under
+// the lock the watchdog needed, so halted() could not turn true before the callback returned.
+TEST(SafetyClient, ACallbackThatBlocksDoesNotDelayTheWatchdog) {
   rt::ScriptedAggregator agg;
   agg.Set(v1::SafetyState::STATE_CLEAR, 1);
   Recorder rec;
   std::atomic<bool> in_clear{false};
+  std::atomic<std::int64_t> decided_silence_ns{0};
   rc::SafetyClient client(
       rc::AggregatorChannelFactory(agg.address()), Config(),
-      [&](const rc::HaltEvent& e) { rec.Add("HALT " + std::string(rc::HaltReasonName(e.reason))); },
+      [&](const rc::HaltEvent& e) {
+        if (e.reason == rc::HaltReason::kNoHeartbeat) decided_silence_ns = e.silence.count();
+        rec.Add("HALT " + std::string(rc::HaltReasonName(e.reason)));
+      },
       [&](const rc::ClearEvent&) {
         rec.Add("CLEAR");
         in_clear = true;
-        std::this_thread::sleep_for(1s);
+        std::this_thread::sleep_for(2s);
         rec.Add("CLEAR returned");
       });
   client.Start();
@@ -89,13 +94,15 @@ TEST(SafetyClient, ACallbackThatBlocksForASecondDoesNotDelayTheWatchdog) {
               "callback still blocked: %s\n",
               after_last_ms, Ms(halted_at - silent_at), rec.Has("CLEAR returned") ? "no" : "yes");
   std::fflush(stdout);
-  EXPECT_LT(after_last_ms, 300.0);  // nominal 30-31 ms; the callback blocks for 1000 ms
-  EXPECT_FALSE(rec.Has("CLEAR returned"));
-  ASSERT_TRUE(rt::WaitFor([&] { return rec.Has("HALT NO_HEARTBEAT"); }, 3s));
+  EXPECT_FALSE(rec.Has("CLEAR returned")) << "halted() waited for the callback";
+  ASSERT_TRUE(rt::WaitFor([&] { return rec.Has("HALT NO_HEARTBEAT"); }, 5s));
   const auto ev = rec.Snapshot();
   const auto clear = std::find(ev.begin(), ev.end(), "CLEAR returned");
   const auto halt = std::find(ev.begin(), ev.end(), "HALT NO_HEARTBEAT");
   EXPECT_LT(clear - ev.begin(), halt - ev.begin()) << "callbacks out of order";
+  std::printf("[ metric ] the watchdog decided at a silence of %.1f ms (limit 30 ms)\n",
+              static_cast<double>(decided_silence_ns.load()) / 1e6);
+  std::fflush(stdout);
   EXPECT_EQ(client.Stats().halts[static_cast<int>(rc::HaltReason::kNoHeartbeat)], 1u);
   client.Stop();
 }
