@@ -1,10 +1,17 @@
 // ruffini-controller: a reference controller for a simulated robot. It asks the aggregator for the joint
 // names (GetStatus), plays a smooth joint trajectory and publishes joint states at --rate-hz over
-// PublishJointStates, and obeys the safety client (safety_client.h): on every halt it freezes the trajectory
-// and keeps publishing the held position; on a clear it resumes (ramping its speed up over --resume-s).
-// stdout: one line per safety transition ("t=1.234 s HALT STOP epoch 3 cause contact upper_arm_a 1.60 N ...")
-// and a summary at exit. Logs go to stderr. Exit codes as the other tools: 0 ok (SIGINT, SIGTERM or
-// --duration-s), 1 bad input or an aggregator that cannot be reached (the message says which), 2 usage.
+// PublishJointStates, and obeys the safety client (safety_client.h) for its robot (--robot): on every halt it
+// freezes the trajectory and keeps publishing the held position; on a clear it resumes (ramping its speed up
+// over --resume-s). stdout: one line per safety transition ("t=1.234 s HALT STOP: STOP epoch 3 cause contact
+// upper_arm_a 1.60 N ...") and a summary at exit. Logs go to stderr. Exit codes as the other tools: 0 ok
+// (SIGINT, SIGTERM or --duration-s), 1 bad input or an aggregator that cannot be reached or guards another
+// robot (the message says which), 2 usage.
+//
+// Threads: the cycle (this main thread) never waits on gRPC or stdout. It hands each joint state to a
+// publishing thread through a one-sample slot (a newer sample replaces one not yet sent: counted), and its
+// lines go through a bounded queue to a writer thread (a line that does not fit is dropped: counted). The
+// safety client's callbacks only queue lines. Shutdown has deadlines: a frozen link or a stuck stdout cannot
+// hold SIGTERM for more than about a second.
 #include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -12,12 +19,18 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
+#include <cstdlib>
+#include <deque>
 #include <exception>
+#include <mutex>
 #include <numbers>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "ruffini/error.h"
@@ -47,15 +60,92 @@ struct SineTrajectory {
   }
 };
 
+// stdout through a bounded queue and a writer thread: Push never blocks (a full queue drops the line and
+// counts it); the writer may block in fwrite on a full pipe without holding anything up.
+class LineWriter {
+ public:
+  explicit LineWriter(std::size_t capacity) : capacity_(capacity), thread_([this] { Run(); }) {}
+  ~LineWriter() {
+    {
+      std::lock_guard lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  void Push(std::string line, bool always = false) {
+    {
+      std::lock_guard lock(mu_);
+      if (!always && queue_.size() >= capacity_) {
+        ++dropped_;
+        return;
+      }
+      queue_.push_back(std::move(line));
+    }
+    cv_.notify_one();
+  }
+  std::uint64_t dropped() {
+    std::lock_guard lock(mu_);
+    return dropped_;
+  }
+  // Waits until every queued line is written, at most `timeout`; false if stdout is stuck.
+  bool Drain(std::chrono::milliseconds timeout) {
+    std::unique_lock lock(mu_);
+    return drained_cv_.wait_for(lock, timeout, [this] { return queue_.empty() && !writing_; });
+  }
+  // When Drain failed: the writer is stuck in a write that may never return; the process must not wait for it.
+  void Abandon() { thread_.detach(); }
+
+ private:
+  void Run() {
+    std::unique_lock lock(mu_);
+    for (;;) {
+      cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
+      if (queue_.empty()) return;
+      std::string line = std::move(queue_.front());
+      queue_.pop_front();
+      writing_ = true;
+      lock.unlock();
+      std::fwrite(line.data(), 1, line.size(), stdout);
+      std::fflush(stdout);
+      lock.lock();
+      writing_ = false;
+      if (queue_.empty()) drained_cv_.notify_all();
+    }
+  }
+  std::size_t capacity_;
+  std::mutex mu_;
+  std::condition_variable cv_, drained_cv_;
+  std::deque<std::string> queue_;
+  std::uint64_t dropped_ = 0;
+  bool stop_ = false, writing_ = false;
+  std::thread thread_;
+};
+
+// The newest joint state, handed from the cycle to the publishing thread. The cycle holds the lock only to
+// copy a few doubles; the publisher holds it only to copy them out, never across a gRPC call.
+struct JointSlot {
+  std::mutex mu;
+  std::condition_variable cv;
+  std::vector<double> q, qd;
+  std::int64_t t_ns = 0;
+  bool fresh = false, stop = false;
+  std::uint64_t replaced = 0;  // samples overwritten before the publisher took them
+};
+
 }  // namespace
 
 int main(int argc, char** argv) {
   spdlog::set_default_logger(spdlog::stderr_color_mt("ruffini-controller"));
   CLI::App app{"ruffini-controller: a reference controller that obeys the aggregator's safety state"};
-  std::string aggregator, trajectory = "sine", subscriber = "ruffini-controller";
+  std::string aggregator, robot, trajectory = "sine", subscriber = "ruffini-controller";
   double rate_hz = 1000, duration_s = 0, amplitude_rad = 0.2, resume_s = 0.5, connect_timeout_s = 5;
   int heartbeat_timeout_ms = 30;
   app.add_option("--aggregator", aggregator, "The aggregator's gRPC address, HOST:PORT")->required();
+  app.add_option("--robot", robot,
+                 "This robot's name, the scene's (e.g. cobot): states from an aggregator guarding another robot are "
+                 "refused (halt WRONG_ROBOT)")
+      ->required();
   app.add_option("--rate-hz", rate_hz, "Joint-state publishing rate, Hz")->capture_default_str()->check(CLI::Range(1.0, 10000.0));
   app.add_option("--duration-s", duration_s, "Stop after this long, s (0: until SIGINT or SIGTERM)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
@@ -87,7 +177,8 @@ int main(int argc, char** argv) {
     const auto address = ruffini::service::ParseHostPort(aggregator, "--aggregator");
     const auto tls = ruffini::service::LoadTls(tls_dir, insecure, "controller");
     ruffini::service::LogTls(tls, "the aggregator cannot tell this controller from anyone else");
-    auto channel = rc::MakeAggregatorChannel(address.str(), ruffini::service::ChannelCredentials(tls));
+    const auto credentials = ruffini::service::ChannelCredentials(tls);
+    auto channel = rc::MakeAggregatorChannel(address.str(), credentials);  // GetStatus and joint states
 
     // The joint names, in the order the aggregator's robot model lists them.
     v1::AggregatorStatus status;
@@ -104,21 +195,32 @@ int main(int argc, char** argv) {
                                   s.error_message() + ")");
       }
     }
+    if (!status.robot_name().empty() && status.robot_name() != robot) {
+      throw ruffini::InputError("--aggregator " + address.str() + " guards robot '" + status.robot_name() +
+                                "', not --robot '" + robot + "'");
+    }
+    if (status.robot_name().empty()) {
+      spdlog::warn("the aggregator at {} names no robot: its states will be refused (WRONG_ROBOT) until it does",
+                   address.str());
+    }
     const std::vector<std::string> names(status.joint_names().begin(), status.joint_names().end());
     if (names.empty()) throw ruffini::InputError("--aggregator " + address.str() + ": the aggregator lists no joints");
     spdlog::info("aggregator {} (version {}): {} joints, safety {}", address.str(), status.aggregator_version(),
                  names.size(), rc::DescribeState(status.safety()));
 
     const auto t0 = Clock::now();
-    auto line = [t0](Clock::time_point t, const std::string& text) {
-      std::printf("t=%.3f s %s\n", Seconds(t - t0), text.c_str());
-      std::fflush(stdout);
+    LineWriter out(1024);
+    auto line = [t0, &out](Clock::time_point t, const std::string& text) {
+      char stamp[32];
+      std::snprintf(stamp, sizeof stamp, "t=%.3f s ", Seconds(t - t0));
+      out.Push(stamp + text + "\n");
     };
     rc::SafetyClientConfig config;
     config.subscriber = subscriber;
+    config.monitor.robot_name = robot;
     config.monitor.heartbeat_timeout = std::chrono::milliseconds(heartbeat_timeout_ms);
     rc::SafetyClient safety(
-        channel, config,
+        rc::AggregatorChannelFactory(address.str(), credentials), config,
         [&](const rc::HaltEvent& e) {
           std::string text = "HALT " + std::string(rc::HaltReasonName(e.reason));
           if (e.reason == rc::HaltReason::kStop || e.reason == rc::HaltReason::kFault ||
@@ -136,7 +238,34 @@ int main(int argc, char** argv) {
         });
     safety.Start();
 
+    // Joint states leave from a thread of their own: a gRPC write may block (a frozen link) and the cycle
+    // must not.
     rc::JointStatePublisher publisher(channel, names);
+    JointSlot slot;
+    slot.q.resize(names.size());
+    slot.qd.resize(names.size());
+    std::atomic<bool> publisher_done{false};
+    v1::PublishJointStatesResponse totals;
+    grpc::Status finish;
+    std::thread publishing([&] {
+      std::vector<double> q(names.size()), qd(names.size());
+      for (;;) {
+        std::int64_t t_ns = 0;
+        {
+          std::unique_lock lock(slot.mu);
+          slot.cv.wait(lock, [&] { return slot.fresh || slot.stop; });
+          if (slot.stop) break;
+          q = slot.q;
+          qd = slot.qd;
+          t_ns = slot.t_ns;
+          slot.fresh = false;
+        }
+        publisher.Publish(q, qd, t_ns);
+      }
+      finish = publisher.Finish(&totals, std::chrono::milliseconds(500));
+      publisher_done = true;
+    });
+
     SineTrajectory traj;
     traj.amplitude_rad = amplitude_rad;
     const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / rate_hz));
@@ -168,7 +297,15 @@ int main(int argc, char** argv) {
         q[i] = traj.Position(i, tau_s);
         qd[i] = speed * traj.Velocity(i, tau_s);
       }
-      publisher.Publish(q, qd, ruffini::service::UnixNowNs());
+      {
+        std::lock_guard lock(slot.mu);
+        std::copy(q.begin(), q.end(), slot.q.begin());
+        std::copy(qd.begin(), qd.end(), slot.qd.begin());
+        slot.t_ns = ruffini::service::UnixNowNs();
+        if (slot.fresh) ++slot.replaced;
+        slot.fresh = true;
+      }
+      slot.cv.notify_one();
       ++cycles;
       next += period;
       const auto after = Clock::now();
@@ -182,17 +319,34 @@ int main(int argc, char** argv) {
 
     const auto t_end = Clock::now();
     safety.Stop();
-    v1::PublishJointStatesResponse totals;
-    const grpc::Status finish = publisher.Finish(&totals);
+    {
+      std::lock_guard lock(slot.mu);
+      slot.stop = true;
+    }
+    slot.cv.notify_one();
+    // The publisher ends its stream itself (Finish, 500 ms deadline); a write stuck on a frozen link is
+    // cancelled after 500 ms.
+    const auto cancel_at = Clock::now() + std::chrono::milliseconds(500);
+    while (!publisher_done && Clock::now() < cancel_at) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    if (!publisher_done) {
+      spdlog::warn("joint-state stream stuck (a frozen link?): cancelling it");
+      publisher.Cancel();
+    }
+    publishing.join();
     const rc::SafetyStats st = safety.Stats();
 
-    std::printf("summary: ran %.3f s, %llu cycles at %.0f Hz (%llu late)\n", Seconds(t_end - t0),
-                static_cast<unsigned long long>(cycles), rate_hz, static_cast<unsigned long long>(overruns));
-    std::printf("summary: joint states written %llu, failed %llu; aggregator received %llu accepted %llu rejected %llu%s%s\n",
-                static_cast<unsigned long long>(publisher.written()), static_cast<unsigned long long>(publisher.failed()),
-                static_cast<unsigned long long>(totals.received()), static_cast<unsigned long long>(totals.accepted()),
-                static_cast<unsigned long long>(totals.rejected()), totals.last_rejection().empty() ? "" : ", last: ",
-                totals.last_rejection().c_str());
+    char buf[512];
+    std::snprintf(buf, sizeof buf, "summary: ran %.3f s, %llu cycles at %.0f Hz (%llu late)\n", Seconds(t_end - t0),
+                  static_cast<unsigned long long>(cycles), rate_hz, static_cast<unsigned long long>(overruns));
+    out.Push(buf, true);
+    std::snprintf(buf, sizeof buf,
+                  "summary: joint states written %llu, failed %llu, replaced before sending %llu; aggregator received "
+                  "%llu accepted %llu rejected %llu%s%s\n",
+                  static_cast<unsigned long long>(publisher.written()), static_cast<unsigned long long>(publisher.failed()),
+                  static_cast<unsigned long long>(slot.replaced), static_cast<unsigned long long>(totals.received()),
+                  static_cast<unsigned long long>(totals.accepted()), static_cast<unsigned long long>(totals.rejected()),
+                  totals.last_rejection().empty() ? "" : ", last: ", totals.last_rejection().c_str());
+    out.Push(buf, true);
     std::string halts;
     for (int r = 0; r < rc::kHaltReasonCount; ++r) {
       const auto n = st.halts[static_cast<std::size_t>(r)];
@@ -200,14 +354,26 @@ int main(int argc, char** argv) {
       if (!halts.empty()) halts += ", ";
       halts += std::string(rc::HaltReasonName(static_cast<rc::HaltReason>(r))) + " " + std::to_string(n);
     }
-    std::printf("summary: halts by reason: %s; clears %llu; time halted %.3f s of %.3f s\n",
-                halts.empty() ? "none" : halts.c_str(), static_cast<unsigned long long>(st.clears),
-                Seconds(st.time_halted), Seconds(t_end - t0));
-    std::printf("summary: safety states %llu (skipped %llu), streams %llu, heartbeat gap max %.1f ms, last %s\n",
-                static_cast<unsigned long long>(st.states), static_cast<unsigned long long>(st.skipped_states),
-                static_cast<unsigned long long>(st.streams_opened), static_cast<double>(st.max_state_gap.count()) / 1e6,
-                st.states ? rc::DescribeState(st.last_state).c_str() : "none");
-    std::fflush(stdout);
+    std::snprintf(buf, sizeof buf, "summary: halts by reason: %s; clears %llu; time halted %.3f s of %.3f s\n",
+                  halts.empty() ? "none" : halts.c_str(), static_cast<unsigned long long>(st.clears),
+                  Seconds(st.time_halted), Seconds(t_end - t0));
+    out.Push(buf, true);
+    std::snprintf(buf, sizeof buf,
+                  "summary: safety states %llu (skipped %llu, refused %llu), streams %llu, channels %llu, heartbeat gap "
+                  "max %.1f ms, last %s\n",
+                  static_cast<unsigned long long>(st.states), static_cast<unsigned long long>(st.skipped_states),
+                  static_cast<unsigned long long>(st.discarded), static_cast<unsigned long long>(st.streams_opened),
+                  static_cast<unsigned long long>(st.channels_created), static_cast<double>(st.max_state_gap.count()) / 1e6,
+                  st.states > st.discarded ? rc::DescribeState(st.last_state).c_str() : "none");
+    out.Push(buf, true);
+    std::snprintf(buf, sizeof buf, "summary: stdout lines dropped %llu\n", static_cast<unsigned long long>(out.dropped()));
+    out.Push(buf, true);
+    if (!out.Drain(std::chrono::milliseconds(500))) {
+      // stdout is stuck (a full pipe nobody reads): exit without waiting for it (exit() would flush it).
+      spdlog::warn("stdout is not being read: exiting without the rest of the summary");
+      out.Abandon();
+      std::_Exit(0);
+    }
     if (!finish.ok()) spdlog::warn("joint-state stream ended with {}: {}", static_cast<int>(finish.error_code()), finish.error_message());
     return 0;
   } catch (const ruffini::InputError& e) {

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <stdexcept>
 #include <utility>
 
 namespace ruffini::controller {
@@ -56,6 +57,8 @@ std::string_view HaltReasonName(HaltReason reason) noexcept {
     case HaltReason::kNoHeartbeat: return "NO_HEARTBEAT";
     case HaltReason::kStreamEnded: return "STREAM_ENDED";
     case HaltReason::kConnectFailed: return "CONNECT_FAILED";
+    case HaltReason::kWrongRobot: return "WRONG_ROBOT";
+    case HaltReason::kNewRun: return "NEW_RUN";
   }
   return "?";
 }
@@ -85,8 +88,21 @@ std::string DescribeState(const v1::SafetyState& s) {
 
 // --- SafetyMonitor ---
 
+namespace {
+bool LinkReason(HaltReason r) {
+  return r == HaltReason::kNoHeartbeat || r == HaltReason::kStreamEnded || r == HaltReason::kConnectFailed;
+}
+bool StateReason(HaltReason r) {
+  return r == HaltReason::kStop || r == HaltReason::kFault || r == HaltReason::kUnknownState ||
+         r == HaltReason::kMissedStop || r == HaltReason::kNewRun;
+}
+}  // namespace
+
 SafetyMonitor::SafetyMonitor(MonitorConfig config, SteadyClock::time_point now)
-    : config_(config), halted_since_(now), last_evidence_(now) {
+    : config_(std::move(config)), halted_since_(now), last_evidence_(now) {
+  if (config_.robot_name.empty()) {
+    throw std::invalid_argument("safety client: MonitorConfig::robot_name is required (the scene's robot name)");
+  }
   config_.states_before_clear = std::max(1, config_.states_before_clear);
   stats_.halted = true;
 }
@@ -96,13 +112,12 @@ nanoseconds SafetyMonitor::Silence(SteadyClock::time_point now) const noexcept {
 }
 
 SafetyMonitor::Action SafetyMonitor::Halt(HaltReason reason, std::string detail, SteadyClock::time_point now,
-                                          nanoseconds silence) {
-  clear_streak_ = 0;
-  const std::uint64_t epoch = stats_.last_state.stop_epoch();
-  const std::int64_t run = stats_.last_state.aggregator_start_t_ns();
-  const bool state_reason = reason == HaltReason::kStop || reason == HaltReason::kFault ||
-                            reason == HaltReason::kUnknownState || reason == HaltReason::kMissedStop;
-  if (halted_ && reason == reason_ && (!state_reason || (epoch == halt_epoch_ && run == halt_run_))) return {};
+                                          nanoseconds silence, const v1::SafetyState* state) {
+  clear_streak_ = 0;  // every halt, told or not, ends the streak
+  const v1::SafetyState& s = state ? *state : stats_.last_state;
+  const std::uint64_t epoch = s.stop_epoch();
+  const Run run = RunOf(s);
+  if (halted_ && reason == reason_ && (!StateReason(reason) || (epoch == halt_epoch_ && run == halt_run_))) return {};
   if (!halted_) halted_since_ = now;
   halted_ = true;
   reason_ = reason;
@@ -112,7 +127,7 @@ SafetyMonitor::Action SafetyMonitor::Halt(HaltReason reason, std::string detail,
   Action a;
   a.kind = Action::Kind::kHalt;
   a.halt.reason = reason;
-  a.halt.state = stats_.last_state;
+  a.halt.state = s;
   a.halt.detail = std::move(detail);
   a.halt.t = now;
   a.halt.silence = silence;
@@ -128,31 +143,66 @@ SafetyMonitor::Action SafetyMonitor::OnStreamOpened(SteadyClock::time_point now)
   return {};
 }
 
+StateVerdict SafetyMonitor::CheckState(const v1::SafetyState& s, SteadyClock::time_point /*arrival*/) {
+  if (s.robot_name() != config_.robot_name) {
+    return StateVerdict::Discard(HaltReason::kWrongRobot, "a state for robot '" + s.robot_name() +
+                                                              "', not this controller's '" + config_.robot_name + "'");
+  }
+  return StateVerdict::Accept();
+}
+
 SafetyMonitor::Action SafetyMonitor::OnState(const v1::SafetyState& s, SteadyClock::time_point now) {
   if (!stream_open_) OnStreamOpened(now);  // tolerate a driver that did not say so
-  const bool same_run = stats_.states > 0 && s.aggregator_start_t_ns() == stats_.last_state.aggregator_start_t_ns();
-  if (stream_has_state_) {
-    stats_.max_state_gap = std::max(stats_.max_state_gap, std::chrono::duration_cast<nanoseconds>(now - last_evidence_));
-  }
-  if (same_run && s.seq() > stats_.last_state.seq() + 1) stats_.skipped_states += s.seq() - stats_.last_state.seq() - 1;
-  if (!same_run) have_clear_epoch_ = false;  // a restarted aggregator counts epochs from 1 again
   ++stats_.states;
+  StateVerdict verdict = CheckState(s, now);
+  if (!verdict.accept) {
+    ++stats_.discarded;
+    ++stats_.discarded_by[static_cast<std::size_t>(verdict.halt)];
+    discard_reason_[static_cast<std::size_t>(verdict.halt)] = true;
+    return Halt(verdict.halt, std::move(verdict.detail), now, nanoseconds(0), &s);
+  }
+  const Run run = RunOf(s);
+  const bool new_run = have_run_ && run != run_;
+  const nanoseconds gap = std::chrono::duration_cast<nanoseconds>(now - last_evidence_);
+  if (stream_has_state_) stats_.max_state_gap = std::max(stats_.max_state_gap, gap);
+  // A clean state follows the one before it (or the stream's start) within the watchdog: a late one means a
+  // silence, whether or not a watchdog tick saw it (a starved watchdog thread): halt and start the streak again.
+  const bool late = gap > config_.heartbeat_timeout;
+  if (late) clear_streak_ = 0;
+  if (have_run_ && !new_run && s.seq() > stats_.last_state.seq() + 1) {
+    stats_.skipped_states += s.seq() - stats_.last_state.seq() - 1;
+  }
+  if (!have_run_ || new_run) have_epoch_ = false;  // a restarted aggregator counts epochs from 1 again
+  have_run_ = true;
+  run_ = run;
+  const bool new_epoch = have_epoch_ && s.stop_epoch() != last_epoch_;
+  have_epoch_ = true;
+  last_epoch_ = s.stop_epoch();
   stats_.last_state = s;
   stream_has_state_ = true;
   last_evidence_ = now;
 
+  Action a = OnAcceptedState(s, new_run, new_epoch, late, now);
+  // A decision on the state itself says more than the silence before it; else the silence is told (one
+  // decision per event, as the callbacks see them).
+  if (a.kind == Action::Kind::kNone && late) return OnSilence(gap, now);
+  return a;
+}
+
+SafetyMonitor::Action SafetyMonitor::OnAcceptedState(const v1::SafetyState& s, bool new_run, bool new_epoch,
+                                                     bool late, SteadyClock::time_point now) {
   switch (s.state()) {
     case v1::SafetyState::STATE_CLEAR: {
-      const bool new_epoch = have_clear_epoch_ && s.stop_epoch() != last_clear_epoch_;
-      have_clear_epoch_ = true;
-      last_clear_epoch_ = s.stop_epoch();
-      if (!halted_) {
-        if (new_epoch) {
-          return Halt(HaltReason::kMissedStop,
-                      "CLEAR with a new stop_epoch: a stop and its reset happened in states not received", now);
-        }
-        return {};
+      if (new_run) {  // the streak starts after it: three clean states of the new run
+        return Halt(HaltReason::kNewRun,
+                    "CLEAR from a new aggregator run (restarted, or another aggregator): clean states again", now);
       }
+      if (new_epoch) {
+        return Halt(HaltReason::kMissedStop,
+                    "CLEAR with a new stop_epoch: a stop and its reset happened in states not received", now);
+      }
+      if (!halted_) return {};
+      if (late) return {};  // it ends a silence: not within the watchdog of the state before, so not clean
       if (++clear_streak_ < config_.states_before_clear) return {};
       Action a;
       a.kind = Action::Kind::kClear;
@@ -179,15 +229,14 @@ SafetyMonitor::Action SafetyMonitor::OnStreamEnded(const std::string& detail, St
                    : Halt(HaltReason::kConnectFailed, "no stream: " + detail, now);
 }
 
-SafetyMonitor::Action SafetyMonitor::OnTick(SteadyClock::time_point now) {
-  if (!stream_open_) return {};
-  // Once halted for the link itself, only a state (or the stream's end) changes the reason.
-  if (halted_ && (reason_ == HaltReason::kNoHeartbeat || reason_ == HaltReason::kStreamEnded ||
-                  reason_ == HaltReason::kConnectFailed)) {
-    return {};
-  }
-  const nanoseconds silence = Silence(now);
-  if (silence <= config_.heartbeat_timeout) return {};
+SafetyMonitor::Action SafetyMonitor::OnTick(SteadyClock::time_point now) { return OnSilence(Silence(now), now); }
+
+SafetyMonitor::Action SafetyMonitor::OnSilence(nanoseconds silence, SteadyClock::time_point now) {
+  if (!stream_open_ || silence <= config_.heartbeat_timeout) return {};
+  clear_streak_ = 0;  // the three-clean-states rule holds after this silence too
+  // Once halted for the link itself, or for states the safety layer discards (they are no heartbeat either),
+  // only an accepted state (or the stream's end) changes the reason.
+  if (halted_ && (LinkReason(reason_) || discard_reason_[static_cast<std::size_t>(reason_)])) return {};
   return Halt(HaltReason::kNoHeartbeat,
               "no state for " + Ms(silence) + " (limit " + Ms(config_.heartbeat_timeout) + ")", now, silence);
 }
@@ -210,21 +259,32 @@ std::shared_ptr<grpc::Channel> MakeAggregatorChannel(const std::string& target,
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(initial_backoff.count()));
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(initial_backoff.count()));
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(max_backoff.count()));
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 1000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 1000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);  // WatchSafety sends no data after its request
+  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);     // a channel made again dials anew
   if (!credentials) credentials = grpc::InsecureChannelCredentials();
   return grpc::CreateCustomChannel(target, credentials, args);
 }
 
+ChannelFactory AggregatorChannelFactory(std::string target, std::shared_ptr<grpc::ChannelCredentials> credentials) {
+  return [target = std::move(target), credentials = std::move(credentials)] {
+    return MakeAggregatorChannel(target, credentials);
+  };
+}
+
 // --- SafetyClient ---
 
-SafetyClient::SafetyClient(std::shared_ptr<grpc::Channel> channel, SafetyClientConfig config, HaltCallback on_halt,
+SafetyClient::SafetyClient(ChannelFactory make_channel, SafetyClientConfig config, HaltCallback on_halt,
                            ClearCallback on_clear)
-    : channel_(std::move(channel)),
-      stub_(v1::Aggregator::NewStub(channel_)),
+    : make_channel_(std::move(make_channel)),
       config_(std::move(config)),
       on_halt_(std::move(on_halt)),
       on_clear_(std::move(on_clear)),
       monitor_(config_.monitor, SteadyClock::now()) {
-  stats_ = monitor_.Stats(SteadyClock::now());
+  if (!make_channel_) throw std::invalid_argument("safety client: no channel factory");
+  Mirror();
 }
 
 SafetyClient::~SafetyClient() { Stop(); }
@@ -233,6 +293,7 @@ void SafetyClient::Start() {
   std::lock_guard lock(mu_);
   if (started_) return;
   started_ = true;
+  notifier_ = std::thread([this] { NotifyLoop(); });
   reader_ = std::thread([this] { ReadLoop(); });
   watchdog_ = std::thread([this] { WatchdogLoop(); });
 }
@@ -243,29 +304,62 @@ void SafetyClient::Stop() {
     if (stopping_.exchange(true)) return;
     if (ctx_) ctx_->TryCancel();
   }
+  halted_.store(true, std::memory_order_release);
   stop_cv_.notify_all();
+  {
+    std::lock_guard lock(notify_mu_);
+  }
+  notify_cv_.notify_all();
   if (reader_.joinable()) reader_.join();
   if (watchdog_.joinable()) watchdog_.join();
+  if (notifier_.joinable()) notifier_.join();
   halted_.store(true, std::memory_order_release);
 }
 
 SafetyStats SafetyClient::Stats() const {
-  std::lock_guard lock(stats_mu_);
-  return stats_;  // refreshed at every event and every watchdog tick
+  std::lock_guard lock(mu_);
+  SafetyStats s = monitor_.Stats(SteadyClock::now());
+  s.channels_created = channels_created_;
+  return s;
 }
 
-void SafetyClient::Apply(const SafetyMonitor::Action& a) {
-  {
-    std::lock_guard lock(stats_mu_);
-    stats_ = monitor_.Stats(SteadyClock::now());
-  }
+void SafetyClient::Mirror() {
+  evidence_ns_.store(monitor_.last_evidence().time_since_epoch().count(), std::memory_order_release);
+  stream_open_.store(monitor_.stream_open(), std::memory_order_release);
+}
+
+void SafetyClient::Apply(SafetyMonitor::Action a) {
+  Mirror();
+  if (a.kind == SafetyMonitor::Action::Kind::kNone) return;
   if (a.kind == SafetyMonitor::Action::Kind::kHalt) {
     halted_.store(true, std::memory_order_release);
-    if (on_halt_ && !stopping_) on_halt_(a.halt);
-  } else if (a.kind == SafetyMonitor::Action::Kind::kClear) {
-    if (stopping_) return;
+  } else if (!stopping_) {
     halted_.store(false, std::memory_order_release);
-    if (on_clear_) on_clear_(a.clear);
+  }
+  if (stopping_) return;
+  if (a.kind == SafetyMonitor::Action::Kind::kHalt ? !on_halt_ : !on_clear_) return;
+  {
+    std::lock_guard lock(notify_mu_);
+    pending_.push_back(std::move(a));
+  }
+  notify_cv_.notify_one();
+}
+
+void SafetyClient::NotifyLoop() {
+  std::unique_lock lock(notify_mu_);
+  for (;;) {
+    notify_cv_.wait(lock, [this] { return stopping_.load() || !pending_.empty(); });
+    if (stopping_) return;
+    SafetyMonitor::Action a = std::move(pending_.front());
+    pending_.pop_front();
+    lock.unlock();
+    // No lock of the client is held here: a slow callback delays only the callbacks after it.
+    if (a.kind == SafetyMonitor::Action::Kind::kHalt) {
+      on_halt_(a.halt);
+    } else {
+      on_clear_(a.clear);
+    }
+    lock.lock();
   }
 }
 
@@ -273,13 +367,21 @@ void SafetyClient::ReadLoop() {
   auto pause = config_.reconnect_initial;
   v1::WatchSafetyRequest request;
   request.set_subscriber(config_.subscriber);
+  bool remake = true;
   while (!stopping_) {
+    if (remake) {
+      channel_ = make_channel_();
+      stub_ = v1::Aggregator::NewStub(channel_);
+      std::lock_guard lock(mu_);
+      ++channels_created_;
+    }
     grpc::ClientContext ctx;
     {
       std::lock_guard lock(ctx_mu_);
       if (stopping_) break;
       ctx_ = &ctx;
     }
+    cancelled_for_silence_.store(false);
     auto reader = stub_->WatchSafety(&ctx, request);
     {
       std::lock_guard lock(mu_);
@@ -289,8 +391,9 @@ void SafetyClient::ReadLoop() {
     v1::SafetyState state;
     while (reader->Read(&state)) {
       any = true;
+      const auto arrival = SteadyClock::now();
       std::lock_guard lock(mu_);
-      Apply(monitor_.OnState(state, SteadyClock::now()));
+      Apply(monitor_.OnState(state, arrival));
     }
     const grpc::Status status = reader->Finish();
     {
@@ -300,8 +403,16 @@ void SafetyClient::ReadLoop() {
     if (stopping_) break;  // our own cancel: not a decision to report
     {
       std::lock_guard lock(mu_);
-      Apply(monitor_.OnStreamEnded(StatusText(status), SteadyClock::now()));
+      const std::string detail =
+          cancelled_for_silence_.load()
+              ? "cancelled after " + std::to_string(config_.cancel_silent_stream_after.count()) +
+                    " ms without an accepted state (a new connection follows)"
+              : StatusText(status);
+      Apply(monitor_.OnStreamEnded(detail, SteadyClock::now()));
     }
+    // A silent stream we cancelled, or a dead transport: a new channel, so the next call dials a new
+    // connection instead of riding the old one.
+    remake = cancelled_for_silence_.load() || status.error_code() == grpc::StatusCode::UNAVAILABLE;
     pause = any ? config_.reconnect_initial : std::min(pause * 2, config_.reconnect_max);
     // At least reconnect_initial; after that, go as soon as the channel is connected again (the channel
     // retries on its own backoff), or when the pause is over.
@@ -309,7 +420,10 @@ void SafetyClient::ReadLoop() {
     {
       std::unique_lock lock(ctx_mu_);
       if (stop_cv_.wait_for(lock, config_.reconnect_initial, [this] { return stopping_.load(); })) break;
+      // A new channel connects on the call itself, after the whole pause (no channel state to wait on).
+      if (remake && stop_cv_.wait_until(lock, until, [this] { return stopping_.load(); })) break;
     }
+    if (remake) continue;
     while (!stopping_ && SteadyClock::now() < until) {
       const auto slice = std::min<SteadyClock::duration>(until - SteadyClock::now(), std::chrono::milliseconds(20));
       if (channel_->WaitForConnected(std::chrono::system_clock::now() + slice)) break;
@@ -318,23 +432,28 @@ void SafetyClient::ReadLoop() {
 }
 
 void SafetyClient::WatchdogLoop() {
+  // Its own clock and the atomics the reader mirrors: a halt for silence takes no lock before halted()
+  // is true, so nothing the reader or a callback does can delay it.
+  const auto timeout = config_.monitor.heartbeat_timeout;
   auto next = SteadyClock::now();
   while (!stopping_) {
     next += config_.watchdog_tick;
     std::this_thread::sleep_until(next);
     const auto now = SteadyClock::now();
     if (next < now - config_.watchdog_tick * 10) next = now;  // the thread was not scheduled: do not catch up
-    bool cancel = false;
+    if (!stream_open_.load(std::memory_order_acquire)) continue;
+    const SteadyClock::time_point evidence{SteadyClock::duration(evidence_ns_.load(std::memory_order_acquire))};
+    const auto silence = std::chrono::duration_cast<nanoseconds>(now - evidence);
+    if (silence <= timeout) continue;
+    halted_.store(true, std::memory_order_release);
     {
       std::lock_guard lock(mu_);
-      Apply(monitor_.OnTick(now));
-      cancel = monitor_.Silence(now) > config_.cancel_silent_stream_after;
-      std::lock_guard s(stats_mu_);
-      stats_ = monitor_.Stats(now);
+      // The monitor agrees with what was stored: the silence seen, even if a state is being handled now.
+      Apply(monitor_.OnSilence(std::max(silence, monitor_.Silence(now)), now));
     }
-    if (cancel) {
+    if (silence > config_.cancel_silent_stream_after) {
       std::lock_guard lock(ctx_mu_);
-      if (ctx_) ctx_->TryCancel();
+      if (ctx_ && !cancelled_for_silence_.exchange(true)) ctx_->TryCancel();
     }
   }
 }
@@ -370,8 +489,9 @@ bool JointStatePublisher::Publish(std::span<const double> positions_rad, std::sp
     seq_ = 0;
   }
   msg_.Clear();
-  // Names on every message: docs/contracts.md lets them be sent once, but ruffini-aggregator 0.1.0 refuses a
-  // state without them (wrong_count); seven short strings a message are cheap.
+  // Names on every message: the aggregator accepts a state without them (the positions are then in its robot's
+  // joint order) and checks them when present, so named states turn a joint list in another order into a
+  // counted rejection (wrong_names) instead of a wrong pose; seven short strings a message are cheap.
   for (const auto& n : names_) msg_.add_names(n);
   for (double q : positions_rad) msg_.add_positions_rad(q);
   for (double v : velocities_rad_s) msg_.add_velocities_rad_s(v);
@@ -379,17 +499,35 @@ bool JointStatePublisher::Publish(std::span<const double> positions_rad, std::sp
   msg_.set_seq(++seq_);
   if (!writer_->Write(msg_)) {
     ++failed_;
-    EndStream();
+    EndStream(std::chrono::milliseconds(100));  // the write failed: the call is over, Finish returns at once
     return false;
   }
   ++written_;
   return true;
 }
 
-grpc::Status JointStatePublisher::EndStream() {
+grpc::Status JointStatePublisher::EndStream(std::chrono::milliseconds deadline) {
   if (!writer_) return grpc::Status::OK;
+  // WritesDone and Finish wait for the aggregator; on a frozen link they would wait forever. A helper
+  // thread cancels the call when the deadline passes (a call's own deadline cannot be set after it began).
+  std::mutex m;
+  std::condition_variable cv;
+  bool done = false;
+  std::thread canceller([&] {
+    std::unique_lock lock(m);
+    if (!cv.wait_for(lock, deadline, [&] { return done; })) {
+      std::lock_guard ctx_lock(ctx_mu_);
+      if (ctx_) ctx_->TryCancel();
+    }
+  });
   writer_->WritesDone();
   const grpc::Status status = writer_->Finish();
+  {
+    std::lock_guard lock(m);
+    done = true;
+  }
+  cv.notify_one();
+  canceller.join();
   totals_.set_received(totals_.received() + response_.received());
   totals_.set_accepted(totals_.accepted() + response_.accepted());
   totals_.set_rejected(totals_.rejected() + response_.rejected());
@@ -401,8 +539,8 @@ grpc::Status JointStatePublisher::EndStream() {
   return status;
 }
 
-grpc::Status JointStatePublisher::Finish(v1::PublishJointStatesResponse* totals) {
-  const grpc::Status status = EndStream();
+grpc::Status JointStatePublisher::Finish(v1::PublishJointStatesResponse* totals, std::chrono::milliseconds deadline) {
+  const grpc::Status status = EndStream(deadline);
   if (totals) *totals = totals_;
   return status;
 }
@@ -415,12 +553,13 @@ void JointStatePublisher::Cancel() {
 
 // --- ResetStop ---
 
-grpc::Status ResetStop(v1::Aggregator::Stub& stub, std::uint64_t stop_epoch, const std::string& operator_name,
-                       const std::string& operator_note, v1::ResetStopResponse* response,
-                       std::chrono::milliseconds timeout) {
+grpc::Status ResetStop(v1::Aggregator::Stub& stub, std::uint64_t aggregator_run_id, std::uint64_t stop_epoch,
+                       const std::string& operator_name, const std::string& operator_note,
+                       v1::ResetStopResponse* response, std::chrono::milliseconds timeout) {
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() + timeout);
   v1::ResetStopRequest request;
+  request.set_aggregator_run_id(aggregator_run_id);
   request.set_stop_epoch(stop_epoch);
   request.set_operator_name(operator_name);
   request.set_operator_note(operator_note);

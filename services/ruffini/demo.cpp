@@ -234,7 +234,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
   Observer observer(address, service::ChannelCredentials(tls));
   log("aggregator on " + address + "; starting ruffini-controller (joint states at " + rate + " Hz)");
-  Child controller({exe("ruffini-controller"), transport, "--aggregator", address, "--rate-hz", rate},
+  Child controller({exe("ruffini-controller"), transport, "--robot", scene.name, "--aggregator", address, "--rate-hz", rate},
                    (run / "controller").string());
   log("starting ruffini-sim (" + o.scenario_path + ", " + rate + " Hz)");
   Child sim({exe("ruffini-sim"), "--scene", o.scene_path, "--scenario", o.scenario_path, "--rate-hz", rate,

@@ -160,7 +160,7 @@ TEST_F(TlsProcess, OperatorResetsOverMutualTlsAndEveryRefusalIsCountedAndChanges
                                       base + "/decoder_" + p, "metrics", metrics));
   }
   fs::create_directories(base + "/controller");
-  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--tls-dir", certs.good, "--aggregator", address, "--rate-hz", "200"},
+  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--tls-dir", certs.good, "--robot", "cobot", "--aggregator", address, "--rate-hz", "200"},
                   base + "/controller");
   v1::ResetStopResponse cleared;
   ASSERT_TRUE(rt::WaitFor([&] {
@@ -281,7 +281,7 @@ TEST_F(TlsProcess, AClientRefusesAnAggregatorFromAnotherCa) {
                                    base + "/aggregator", "grpc", port);
   const std::string address = "127.0.0.1:" + std::to_string(port);
   fs::create_directories(base + "/controller");
-  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--tls-dir", certs.good, "--aggregator", address, "--connect-timeout-s", "1"},
+  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--tls-dir", certs.good, "--robot", "cobot", "--aggregator", address, "--connect-timeout-s", "1"},
                   base + "/controller");
   EXPECT_EQ(ctl.WaitExit(10s), 1);
   EXPECT_NE(ctl.stderr_text().find("no aggregator answered GetStatus"), std::string::npos) << ctl.stderr_text();

@@ -85,13 +85,20 @@ struct Recorder {
   }
 };
 
+// The cobot scene's robot: the aggregator names it in every state (needs the aggregator that fills robot_name).
+rc::SafetyClientConfig Config() {
+  rc::SafetyClientConfig c;
+  c.monitor.robot_name = "cobot";
+  return c;
+}
+
 double Ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
 
 TEST(ControllerProcess, TheClientStartsHaltedAndReportsTheStartupFault) {
   int port = 0;
   rt::Process agg = StartAggregator(Base("startup") + "/aggregator", "127.0.0.1:0", port);
   Recorder rec;
-  rc::SafetyClient client(rc::MakeAggregatorChannel("127.0.0.1:" + std::to_string(port)), {}, rec.OnHalt(),
+  rc::SafetyClient client(rc::AggregatorChannelFactory("127.0.0.1:" + std::to_string(port)), Config(), rec.OnHalt(),
                           rec.OnClear());
   EXPECT_TRUE(client.halted());
   EXPECT_EQ(client.Stats().reason, rc::HaltReason::kNotStarted);
@@ -118,7 +125,7 @@ TEST(ControllerProcess, ASigstoppedAggregatorIsANoHeartbeatHaltWithin30MsAndSigc
   int port = 0;
   rt::Process agg = StartAggregator(Base("sigstop") + "/aggregator", "127.0.0.1:0", port);
   Recorder rec;
-  rc::SafetyClient client(rc::MakeAggregatorChannel("127.0.0.1:" + std::to_string(port)), {}, rec.OnHalt(),
+  rc::SafetyClient client(rc::AggregatorChannelFactory("127.0.0.1:" + std::to_string(port)), Config(), rec.OnHalt(),
                           rec.OnClear());
   client.Start();
   ASSERT_TRUE(rt::WaitFor([&] { return client.Stats().states >= 10; }, 5s)) << agg.stderr_text();
@@ -168,7 +175,7 @@ TEST(ControllerProcess, ASigtermedAggregatorHaltsAndARestartOnTheSamePortIsFound
   int port = 0;
   rt::Process agg = StartAggregator(Base("restart") + "/aggregator1", "127.0.0.1:0", port);
   Recorder rec;
-  rc::SafetyClient client(rc::MakeAggregatorChannel("127.0.0.1:" + std::to_string(port)), {}, rec.OnHalt(),
+  rc::SafetyClient client(rc::AggregatorChannelFactory("127.0.0.1:" + std::to_string(port)), Config(), rec.OnHalt(),
                           rec.OnClear());
   client.Start();
   ASSERT_TRUE(rt::WaitFor([&] { return client.Stats().states >= 10; }, 5s)) << agg.stderr_text();
@@ -223,7 +230,7 @@ TEST(ControllerProcess, RuffiniControllerPublishesJointStatesTheAggregatorAccept
   const std::string base = Base("run");
   rt::Process agg = StartAggregator(base + "/aggregator", "127.0.0.1:0", port);
   const std::string address = "127.0.0.1:" + std::to_string(port);
-  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--aggregator", address, "--rate-hz", "1000", "--duration-s", "2"},
+  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--robot", "cobot", "--aggregator", address, "--rate-hz", "1000", "--duration-s", "2"},
                   base + "/controller");
   auto channel = rc::MakeAggregatorChannel(address);
   auto stub = v1::Aggregator::NewStub(channel);
@@ -262,7 +269,7 @@ TEST(ControllerProcess, RuffiniControllerStopsOnSigtermWithExitZero) {
   int port = 0;
   const std::string base = Base("sigterm");
   rt::Process agg = StartAggregator(base + "/aggregator", "127.0.0.1:0", port);
-  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--aggregator", "127.0.0.1:" + std::to_string(port)}, base + "/controller");
+  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--robot", "cobot", "--aggregator", "127.0.0.1:" + std::to_string(port)}, base + "/controller");
   ASSERT_TRUE(rt::WaitFor([&] { return ctl.stdout_text().find("HALT FAULT") != std::string::npos || !ctl.Running(); },
                           5s)) << ctl.stderr_text();
   EXPECT_EQ(ctl.Stop(), 0) << ctl.stderr_text();
@@ -274,13 +281,13 @@ TEST(ControllerProcess, RuffiniControllerStopsOnSigtermWithExitZero) {
 TEST(ControllerProcess, ABadAddressIsAClearError) {
   const std::string base = Base("badaddress");
   {
-    rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--aggregator", "localhost"}, base + "/noport");
+    rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--robot", "cobot", "--aggregator", "localhost"}, base + "/noport");
     EXPECT_EQ(ctl.WaitExit(10s), 1);
     EXPECT_NE(ctl.stderr_text().find("--aggregator"), std::string::npos) << ctl.stderr_text();
   }
   {
     // Nothing listens on port 1.
-    rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--aggregator", "127.0.0.1:1", "--connect-timeout-s", "0.5"},
+    rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--robot", "cobot", "--aggregator", "127.0.0.1:1", "--connect-timeout-s", "0.5"},
                     base + "/nobody");
     EXPECT_EQ(ctl.WaitExit(10s), 1);
     EXPECT_NE(ctl.stderr_text().find("--aggregator 127.0.0.1:1: no aggregator answered GetStatus within"),
@@ -301,7 +308,7 @@ TEST(ControllerProcess, ThePythonExampleSeesTheFaultStates) {
   int port = 0;
   rt::Process agg = StartAggregator(base + "/aggregator", "127.0.0.1:0", port);
   rt::Process py({RUFFINI_PYTHON, kSrc + "/services/controller/python/watch_safety.py", "--aggregator",
-                  "127.0.0.1:" + std::to_string(port), "--duration-s", "2", "--stubs", RUFFINI_PYTHON_STUBS,
+                  "127.0.0.1:" + std::to_string(port), "--robot", "cobot", "--duration-s", "2", "--stubs", RUFFINI_PYTHON_STUBS,
                   "--insecure"},
                  base + "/python");
   EXPECT_EQ(py.WaitExit(20s), 0) << py.stderr_text();
@@ -338,7 +345,7 @@ TEST(ControllerProcess, ThePythonExampleSpeaksMutualTls) {
   const int port = ReadPorts(dir + "/ports")["grpc"];
   ASSERT_GT(port, 0) << agg.stderr_text();
   rt::Process py({RUFFINI_PYTHON, kSrc + "/services/controller/python/watch_safety.py", "--aggregator",
-                  "127.0.0.1:" + std::to_string(port), "--duration-s", "2", "--stubs", RUFFINI_PYTHON_STUBS,
+                  "127.0.0.1:" + std::to_string(port), "--robot", "cobot", "--duration-s", "2", "--stubs", RUFFINI_PYTHON_STUBS,
                   "--tls-dir", certs},
                  base + "/python");
   EXPECT_EQ(py.WaitExit(20s), 0) << py.stderr_text();

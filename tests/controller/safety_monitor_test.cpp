@@ -13,12 +13,18 @@ using Kind = rc::SafetyMonitor::Action::Kind;
 
 const rc::SteadyClock::time_point kT0{std::chrono::seconds(1000)};
 
-v1::SafetyState State(v1::SafetyState::State s, std::uint64_t epoch, std::uint64_t seq, std::int64_t run = 42) {
+const std::string kRobot = "cobot";
+const rc::MonitorConfig kConfig{.robot_name = kRobot};
+
+v1::SafetyState State(v1::SafetyState::State s, std::uint64_t epoch, std::uint64_t seq, std::int64_t run = 42,
+                      const std::string& robot = kRobot) {
   v1::SafetyState m;
   m.set_state(s);
   m.set_stop_epoch(epoch);
   m.set_seq(seq);
   m.set_aggregator_start_t_ns(run);
+  m.set_aggregator_run_id(static_cast<std::uint64_t>(run) * 1000 + 7);
+  m.set_robot_name(robot);
   if (s == v1::SafetyState::STATE_STOP) {
     m.mutable_cause()->set_kind(v1::SafetyCause::KIND_CONTACT);
     m.mutable_cause()->set_patch_id("upper_arm_a");
@@ -45,7 +51,7 @@ rc::SteadyClock::time_point ClearUp(rc::SafetyMonitor& m, rc::SteadyClock::time_
 }
 
 TEST(SafetyMonitor, StartsHaltedAndClearsOnlyAfterThreeClearStatesOnALiveStream) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   EXPECT_TRUE(m.halted());
   EXPECT_EQ(m.reason(), rc::HaltReason::kNotStarted);
   m.OnStreamOpened(kT0);
@@ -59,7 +65,7 @@ TEST(SafetyMonitor, StartsHaltedAndClearsOnlyAfterThreeClearStatesOnALiveStream)
 }
 
 TEST(SafetyMonitor, AStreamEndInTheMiddleOfTheClearStreakStartsItAgain) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   m.OnState(State(kClear, 1, 1), kT0 + 1ms);
   m.OnState(State(kClear, 1, 2), kT0 + 11ms);
@@ -71,7 +77,7 @@ TEST(SafetyMonitor, AStreamEndInTheMiddleOfTheClearStreakStartsItAgain) {
 }
 
 TEST(SafetyMonitor, StopHaltsAtOnceAndNamesTheCause) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 2, seq);
@@ -94,25 +100,26 @@ TEST(SafetyMonitor, StopHaltsAtOnceAndNamesTheCause) {
 }
 
 TEST(SafetyMonitor, AnUnknownStateIsAStop) {
-  rc::SafetyMonitor m({}, kT0);
-  m.OnStreamOpened(kT0);
-  std::uint64_t seq = 0;
-  const auto t = ClearUp(m, kT0, 1, seq);
-  for (int v : {0, 17}) {
+  // Each value from a moving robot (a fresh, cleared monitor each): the halt is asserted for every value.
+  for (int v : {0, 17, -3}) {
+    SCOPED_TRACE(v);
+    rc::SafetyMonitor m(kConfig, kT0);
+    m.OnStreamOpened(kT0);
+    std::uint64_t seq = 0;
+    const auto t = ClearUp(m, kT0, 1, seq);
+    ASSERT_FALSE(m.halted());
     v1::SafetyState s = State(kClear, 1, ++seq);
     // Through reflection: the setter refuses a value the enum does not name; the wire does not.
     s.GetReflection()->SetEnumValue(&s, s.GetDescriptor()->FindFieldByName("state"), v);
     const auto a = m.OnState(s, t + 10ms);
     EXPECT_TRUE(m.halted());
-    if (v == 0) {
-      ASSERT_EQ(a.kind, Kind::kHalt);
-      EXPECT_EQ(a.halt.reason, rc::HaltReason::kUnknownState);
-    }
+    ASSERT_EQ(a.kind, Kind::kHalt);
+    EXPECT_EQ(a.halt.reason, rc::HaltReason::kUnknownState);
   }
 }
 
 TEST(SafetyMonitor, SilenceLongerThan30MsHaltsOnceThenAStateChangesTheReason) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 1, seq);
@@ -123,16 +130,17 @@ TEST(SafetyMonitor, SilenceLongerThan30MsHaltsOnceThenAStateChangesTheReason) {
   EXPECT_EQ(a.halt.silence, 30ms + 1ns);
   EXPECT_EQ(a.halt.detail, "no state for 30.0 ms (limit 30.0 ms)");
   EXPECT_EQ(m.OnTick(t + 60ms).kind, Kind::kNone);  // once, not every tick
-  // Heartbeats again: CLEAR needs its streak on the live stream.
+  // Heartbeats again: CLEAR needs its streak on the live stream, after the state that ended the silence.
   t += 200ms;
   EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t).kind, Kind::kNone);
   EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 10ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kClear);
-  EXPECT_EQ(m.Stats(t + 20ms).max_state_gap, 200ms);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 30ms).kind, Kind::kClear);
+  EXPECT_EQ(m.Stats(t + 30ms).max_state_gap, 200ms);
 }
 
 TEST(SafetyMonitor, WhileHaltedForFaultSilenceIsReportedAndTheNextFaultIsToo) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   EXPECT_EQ(m.OnState(State(kFault, 1, 1), kT0 + 1ms).halt.reason, rc::HaltReason::kFault);
   EXPECT_EQ(m.OnState(State(kFault, 1, 2), kT0 + 11ms).kind, Kind::kNone);
@@ -142,13 +150,13 @@ TEST(SafetyMonitor, WhileHaltedForFaultSilenceIsReportedAndTheNextFaultIsToo) {
 }
 
 TEST(SafetyMonitor, AStreamThatNeverDeliversIsSilenceToo) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   EXPECT_EQ(m.OnTick(kT0 + 31ms).halt.reason, rc::HaltReason::kNoHeartbeat);
 }
 
 TEST(SafetyMonitor, StreamEndAndConnectFailureAreTold) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   const auto c = m.OnStreamEnded("UNAVAILABLE: failed to connect", kT0 + 1ms);
   ASSERT_EQ(c.kind, Kind::kHalt);
@@ -169,7 +177,7 @@ TEST(SafetyMonitor, StreamEndAndConnectFailureAreTold) {
 }
 
 TEST(SafetyMonitor, AClearUnderANewEpochMeansAStopWasMissed) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 2, seq);
@@ -184,7 +192,7 @@ TEST(SafetyMonitor, AClearUnderANewEpochMeansAStopWasMissed) {
 }
 
 TEST(SafetyMonitor, ARestartedAggregatorCountsEpochsAgainWithoutAFalseMissedStop) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 5, seq);
@@ -199,7 +207,7 @@ TEST(SafetyMonitor, ARestartedAggregatorCountsEpochsAgainWithoutAFalseMissedStop
 }
 
 TEST(SafetyMonitor, TimeHaltedAddsUp) {
-  rc::SafetyMonitor m({}, kT0);
+  rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 1, seq);  // halted 30 ms
@@ -209,14 +217,130 @@ TEST(SafetyMonitor, TimeHaltedAddsUp) {
 }
 
 TEST(SafetyMonitor, TheTimeoutAndTheStreakAreConfigurable) {
-  rc::SafetyMonitor m({.heartbeat_timeout = 50ms, .states_before_clear = 1}, kT0);
+  rc::SafetyMonitor m({.robot_name = kRobot, .heartbeat_timeout = 50ms, .states_before_clear = 1}, kT0);
   m.OnStreamOpened(kT0);
   EXPECT_EQ(m.OnState(State(kClear, 1, 1), kT0 + 1ms).kind, Kind::kClear);
   EXPECT_EQ(m.OnTick(kT0 + 40ms).kind, Kind::kNone);
   EXPECT_EQ(m.OnTick(kT0 + 52ms).kind, Kind::kHalt);
 }
 
+// Finding 8: the three-clean-states rule after every halt, a halt for the link included. Before, OnTick
+// returned early while halted for NO_HEARTBEAT, so the streak survived the silence and three CLEARs spread
+// over seconds released the robot.
+TEST(SafetyMonitor, AfterALinkHaltCleanStatesMustFollowEachOtherWithinTheWatchdog) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 0;
+  auto t = ClearUp(m, kT0, 1, seq);
+  EXPECT_EQ(m.OnTick(t + 31ms).halt.reason, rc::HaltReason::kNoHeartbeat);
+  // CLEARs one second apart, the watchdog ticking in between as the client's does: never a clear.
+  for (int i = 0; i < 6; ++i) {
+    t += 1s;
+    EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t).kind, Kind::kNone) << i;
+    EXPECT_EQ(m.OnTick(t + 31ms).kind, Kind::kNone);  // told once
+  }
+  EXPECT_TRUE(m.halted());
+  // Then three within the watchdog after the late one: released.
+  t += 1s;
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 10ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 30ms).kind, Kind::kClear);
+}
+
+// The same rule when no watchdog tick came in between (a starved watchdog thread): a late CLEAR starts the
+// streak again by itself.
+TEST(SafetyMonitor, LateCleanStatesDoNotAddUpEvenWithoutAWatchdogTick) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 0;
+  auto t = ClearUp(m, kT0, 1, seq);
+  EXPECT_EQ(m.OnState(State(kStop, 2, ++seq), t + 10ms).halt.reason, rc::HaltReason::kStop);
+  t += 10ms;
+  for (int i = 0; i < 10; ++i) EXPECT_NE(m.OnState(State(kClear, 2, ++seq), t += 31ms).kind, Kind::kClear) << i;
+  EXPECT_EQ(m.reason(), rc::HaltReason::kNoHeartbeat);  // the late state itself tells of the silence
+  // The late CLEAR is not clean itself; three more within the watchdog (30 ms exactly is within) release.
+  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kClear);
+}
+
+TEST(SafetyMonitor, AStateForAnotherRobotIsDiscardedCountedAndHalts) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 0;
+  auto t = ClearUp(m, kT0, 1, seq);
+  const auto a = m.OnState(State(kClear, 1, ++seq, 42, "other-cell"), t += 10ms);
+  ASSERT_EQ(a.kind, Kind::kHalt);
+  EXPECT_EQ(a.halt.reason, rc::HaltReason::kWrongRobot);
+  EXPECT_EQ(a.halt.state.robot_name(), "other-cell");
+  EXPECT_EQ(a.halt.detail, "a state for robot 'other-cell', not this controller's 'cobot'");
+  // An empty name (an aggregator that does not fill it) is another robot too; CLEARs from it never release.
+  for (int i = 0; i < 10; ++i) {
+    const auto b = m.OnState(State(kClear, 1, ++seq, 42, ""), t += 10ms);
+    EXPECT_NE(b.kind, Kind::kClear);
+  }
+  EXPECT_TRUE(m.halted());
+  EXPECT_EQ(m.reason(), rc::HaltReason::kWrongRobot);
+  auto st = m.Stats(t);
+  EXPECT_EQ(st.discarded, 11u);
+  EXPECT_EQ(st.discarded_by[static_cast<int>(rc::HaltReason::kWrongRobot)], 11u);
+  EXPECT_EQ(st.halts[static_cast<int>(rc::HaltReason::kWrongRobot)], 1u);  // told once
+  EXPECT_EQ(st.last_state.robot_name(), kRobot);                          // discarded states are not kept
+  // A discarded state is no heartbeat: the watchdog counts from the last accepted one.
+  EXPECT_GT(m.Silence(t), 30ms);
+  // Our robot's states again: three clean ones release.
+  t = ClearUp(m, t, 1, seq);
+  EXPECT_FALSE(m.halted());
+  st = m.Stats(t);
+  EXPECT_EQ(st.discarded, 11u);
+  EXPECT_EQ(st.states, seq);
+}
+
+TEST(SafetyMonitor, TheRobotNameIsRequired) {
+  EXPECT_THROW(rc::SafetyMonitor(rc::MonitorConfig{}, kT0), std::invalid_argument);
+}
+
+// A new aggregator_run_id is a restart even if the start time is the same (and the other way round): the
+// epochs start again, and the robot halts until three clean states of the new run.
+TEST(SafetyMonitor, ACleanStateFromANewRunHaltsUntilThreeCleanStatesOfThatRun) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 0;
+  auto t = ClearUp(m, kT0, 6, seq);
+  v1::SafetyState s = State(kClear, 6, ++seq);
+  s.set_aggregator_run_id(s.aggregator_run_id() + 1);
+  const auto a = m.OnState(s, t += 10ms);
+  ASSERT_EQ(a.kind, Kind::kHalt);
+  EXPECT_EQ(a.halt.reason, rc::HaltReason::kNewRun);
+  for (int i = 0; i < 2; ++i) {
+    s.set_seq(++seq);
+    EXPECT_EQ(m.OnState(s, t += 10ms).kind, Kind::kNone);
+  }
+  s.set_seq(++seq);
+  EXPECT_EQ(m.OnState(s, t += 10ms).kind, Kind::kClear);  // three clean states of the new run after the halt
+  // Now the start time alone changes.
+  s.set_aggregator_start_t_ns(s.aggregator_start_t_ns() + 1);
+  s.set_stop_epoch(1);
+  EXPECT_EQ(m.OnState(s, t += 10ms).halt.reason, rc::HaltReason::kNewRun);
+}
+
+TEST(SafetyMonitor, AClearUnderANewEpochIsAMissedStopWhileHaltedToo) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 0;
+  auto t = ClearUp(m, kT0, 2, seq);
+  EXPECT_EQ(m.OnState(State(kStop, 3, ++seq), t += 10ms).halt.reason, rc::HaltReason::kStop);
+  // Epoch 4's STOP and its reset were skipped: the CLEAR of epoch 4 is a missed stop, and the streak starts after it.
+  EXPECT_EQ(m.OnState(State(kClear, 4, ++seq), t += 10ms).halt.reason, rc::HaltReason::kMissedStop);
+  EXPECT_EQ(m.OnState(State(kClear, 4, ++seq), t += 10ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 4, ++seq), t += 10ms).kind, Kind::kNone);
+  EXPECT_EQ(m.OnState(State(kClear, 4, ++seq), t += 10ms).kind, Kind::kClear);
+}
+
 TEST(SafetyMonitor, ReasonNames) {
+  EXPECT_EQ(rc::HaltReasonName(rc::HaltReason::kWrongRobot), "WRONG_ROBOT");
+  EXPECT_EQ(rc::HaltReasonName(rc::HaltReason::kNewRun), "NEW_RUN");
   EXPECT_EQ(rc::HaltReasonName(rc::HaltReason::kNoHeartbeat), "NO_HEARTBEAT");
   EXPECT_EQ(rc::HaltReasonName(rc::HaltReason::kConnectFailed), "CONNECT_FAILED");
   EXPECT_EQ(rc::DescribeState(State(kFault, 1, 1)), "FAULT epoch 1 cause startup");

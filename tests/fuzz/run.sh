@@ -1,5 +1,7 @@
 #!/usr/bin/env bash
-# Runs the Hyperion codec fuzzer and prints how many inputs it executed and how many crashed.
+# Runs a fuzzer (the Hyperion codec's by default) and prints how many inputs it executed and how many crashed.
+# $RUFFINI_FUZZ_BIN, $RUFFINI_FUZZ_CORPUS (a seed corpus folder) and $RUFFINI_FUZZ_MAX_LEN choose another
+# (ctest: fuzz.safety_client with bin/safety_client_fuzz and tests/fuzz/corpus_safety_client).
 #   tests/fuzz/run.sh [seconds]            fuzz for that long (default 60)
 #   tests/fuzz/run.sh --runs N [--seed S]  a fixed number of runs (what ctest does)
 # The binary is $RUFFINI_FUZZ_BIN or build/release/bin/hyperion_fuzz; it exists only when clang++-14 with
@@ -32,8 +34,8 @@ fi
 mkdir -p "$base"
 work=$(mktemp -d "$base/run.XXXXXX")
 mkdir -p "$work/corpus" "$work/artifacts"
-cp "$here"/corpus/* "$work/corpus/"
-args=(-print_final_stats=1 -artifact_prefix="$work/artifacts/" -max_len=4096)
+cp "${RUFFINI_FUZZ_CORPUS:-$here/corpus}"/* "$work/corpus/"
+args=(-print_final_stats=1 -artifact_prefix="$work/artifacts/" -max_len="${RUFFINI_FUZZ_MAX_LEN:-4096}")
 if [[ -n "$runs" ]]; then args+=(-runs="$runs"); else args+=(-max_total_time="$seconds"); fi
 if [[ -n "$seed" ]]; then args+=(-seed="$seed"); fi
 

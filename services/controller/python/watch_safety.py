@@ -1,32 +1,158 @@
 #!/usr/bin/python3
 """The Ruffini safety contract from Python: subscribe to the aggregator's WatchSafety, print every change
-of state, and halt on silence.
+of state and every decision, and halt on anything but a live stream of clean CLEAR states.
 
-The rules (docs/contracts.md, docs/controller.md): the robot may move only while the newest state is CLEAR,
-it arrived less than 30 ms ago on a live stream, and the stream is open. STOP, FAULT, any other value, a
-state older than 30 ms, the stream ending or failing to open: halt. A real controller would command its
-robot where this prints HALT and CLEAR.
+The rules are the C++ client's (services/controller/safety_client.h, docs/controller.md); Monitor below is
+its SafetyMonitor, tested on its own. The robot may move only after three CLEAR states in a row of one
+aggregator run, each within the watchdog (30 ms) of the state before, on a live stream, since the last
+halt of any kind. It halts (and the count starts again) on:
+  STOP, FAULT or any other value (UNKNOWN_STATE); a state for another robot, an empty name included
+  (WRONG_ROBOT, the state is refused and counted); a CLEAR whose stop_epoch is not the epoch of the state
+  before it in the same run (MISSED_STOP: a STOP and its reset happened in states this subscriber skipped);
+  a CLEAR from a new aggregator run (NEW_RUN: aggregator_run_id or aggregator_start_t_ns changed);
+  silence longer than the watchdog (NO_HEARTBEAT); the stream ending (STREAM_ENDED) or not opening
+  (CONNECT_FAILED).
+A real controller would command its robot where this prints HALT and CLEAR.
+
+The channel sends HTTP/2 keepalive pings every 1 s (a dead peer is found in about 2 s); a stream silent for
+0.5 s is cancelled and the channel made again, so the next call dials a new connection.
 
 Needs Debian's python3-grpcio and python3-protobuf, and the stubs the build generates from
 proto/ruffini/v1/ (protoc with /usr/bin/grpc_python_plugin, into build/<preset>/services/controller/python):
 
-  /usr/bin/python3 services/controller/python/watch_safety.py --aggregator 127.0.0.1:50051 \
-      --stubs build/release/services/controller/python
+  /usr/bin/python3 services/controller/python/watch_safety.py --aggregator 127.0.0.1:50051 --robot cobot \\
+      --stubs build/release/services/controller/python --insecure
 
 Exit codes: 0 after --duration-s or on Ctrl-C, 1 when the stubs or grpc cannot be imported, 2 usage.
 """
 import argparse
-import os
 import collections
+import os
+import queue
 import signal
 import sys
 import threading
 import time
 
+CLEAR, STOP, FAULT = 1, 2, 3  # SafetyState.State values (aggregator.proto)
+LINK_REASONS = {"NO_HEARTBEAT", "STREAM_ENDED", "CONNECT_FAILED"}
+STATE_REASONS = {"STOP", "FAULT", "UNKNOWN_STATE", "MISSED_STOP", "NEW_RUN"}
+
+
+class Monitor:
+    """The client's state machine, with no threads and no clock of its own (every call carries the time,
+    in seconds on a monotonic clock). Each on_* returns None or a decision: ("HALT", reason, detail, state)
+    or ("CLEAR", None, "", state)."""
+
+    def __init__(self, robot, timeout_s=0.030, states_before_clear=3, now=0.0):
+        if not robot:
+            raise ValueError("the robot's name is required")
+        self.robot, self.timeout_s, self.n_clear = robot, timeout_s, max(1, states_before_clear)
+        self.halted, self.reason = True, "NOT_STARTED"
+        self.halt_key = None  # (epoch, run) of the state behind the current halt
+        self.stream_open = self.stream_has_state = False
+        self.last_evidence = now  # the last accepted state on this stream, or the stream's start
+        self.streak = 0
+        self.run = self.epoch = None  # of the newest accepted state
+        self.last_state = None
+        self.discard_reasons = set()
+        self.counts = collections.Counter()  # received states by value; "refused" for discarded ones
+
+    @staticmethod
+    def run_of(s):
+        return (s.aggregator_run_id, s.aggregator_start_t_ns)
+
+    def _halt(self, reason, detail, now, state=None):
+        self.streak = 0  # every halt, told or not, ends the streak
+        s = state if state is not None else self.last_state
+        key = (s.stop_epoch, self.run_of(s)) if s is not None else None
+        if self.halted and reason == self.reason and (reason not in STATE_REASONS or key == self.halt_key):
+            return None
+        self.halted, self.reason, self.halt_key = True, reason, key
+        return ("HALT", reason, detail, s)
+
+    def check_state(self, s, arrival):
+        """The safety layer's check of every received state (with its arrival time): (True, None, "") or
+        (False, halt_reason, detail). Integrity, sequence and freshness checks belong here too."""
+        if s.robot_name != self.robot:
+            return False, "WRONG_ROBOT", f"a state for robot '{s.robot_name}', not this controller's '{self.robot}'"
+        return True, None, ""
+
+    def on_stream_opened(self, now):
+        self.stream_open, self.stream_has_state, self.last_evidence, self.streak = True, False, now, 0
+
+    def on_state(self, s, now):
+        if not self.stream_open:
+            self.on_stream_opened(now)
+        self.counts[s.state] += 1
+        ok, reason, detail = self.check_state(s, now)
+        if not ok:
+            self.counts["refused"] += 1
+            self.discard_reasons.add(reason)
+            return self._halt(reason, detail, now, s)
+        run = self.run_of(s)
+        new_run = self.run is not None and run != self.run
+        gap = now - self.last_evidence
+        late = gap > self.timeout_s  # a silence even if no watchdog tick saw it
+        if late:
+            self.streak = 0
+        if self.run is None or new_run:
+            self.epoch = None  # a restarted aggregator counts epochs from 1 again
+        new_epoch = self.epoch is not None and s.stop_epoch != self.epoch
+        self.run, self.epoch, self.last_state = run, s.stop_epoch, s
+        self.stream_has_state, self.last_evidence = True, now
+        event = self._on_accepted(s, new_run, new_epoch, late, now)
+        if event is None and late:  # one decision per event: the state's, else the silence's
+            return self._on_silence(gap, now)
+        return event
+
+    def _on_accepted(self, s, new_run, new_epoch, late, now):
+        if s.state == CLEAR:
+            if new_run:  # the streak starts after it: three clean states of the new run
+                return self._halt("NEW_RUN", "CLEAR from a new aggregator run: clean states again", now)
+            if new_epoch:
+                return self._halt("MISSED_STOP", "CLEAR with a new stop_epoch: a stop and its reset were skipped", now)
+            if not self.halted or late:  # a CLEAR that ends a silence is not clean: the streak starts after it
+                return None
+            self.streak += 1
+            if self.streak < self.n_clear:
+                return None
+            self.halted, self.streak = False, 0
+            return ("CLEAR", None, "", s)
+        if s.state == STOP:
+            return self._halt("STOP", "", now)
+        if s.state == FAULT:
+            return self._halt("FAULT", "", now)
+        return self._halt("UNKNOWN_STATE", "treated as STOP", now)
+
+    def on_stream_ended(self, detail, now):
+        had_state = self.stream_has_state
+        self.stream_open = self.stream_has_state = False
+        if had_state:
+            return self._halt("STREAM_ENDED", "stream ended: " + detail, now)
+        return self._halt("CONNECT_FAILED", "no stream: " + detail, now)
+
+    def silence(self, now):
+        return now - self.last_evidence if self.stream_open else 0.0
+
+    def on_tick(self, now):
+        return self._on_silence(self.silence(now), now)
+
+    def _on_silence(self, silence, now):
+        if not self.stream_open or silence <= self.timeout_s:
+            return None
+        self.streak = 0  # the three-clean-states rule holds after this silence too
+        if self.halted and (self.reason in LINK_REASONS or self.reason in self.discard_reasons):
+            return None
+        return self._halt("NO_HEARTBEAT", f"no state for {silence * 1000:.1f} ms "
+                          f"(limit {self.timeout_s * 1000:.1f} ms)", now)
+
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--aggregator", required=True, help="the aggregator's gRPC address, HOST:PORT")
+    parser.add_argument("--robot", required=True, help="this robot's name, the scene's (e.g. cobot): states "
+                        "for another robot (or naming none) are refused")
     parser.add_argument("--stubs", default="", help="folder holding the generated ruffini/v1/*_pb2*.py")
     parser.add_argument("--duration-s", type=float, default=0.0, help="stop after this long (0: until Ctrl-C)")
     parser.add_argument("--timeout-ms", type=float, default=30.0, help="halt when no state came for this long")
@@ -36,6 +162,8 @@ def main():
                      "(deploy/tls/make-dev-ca.sh), as the C++ services read them")
     tls.add_argument("--insecure", action="store_true", help="plaintext (an --insecure aggregator)")
     args = parser.parse_args()
+    if not args.robot:
+        parser.error("--robot must name the robot")
 
     if args.stubs:
         sys.path.insert(0, args.stubs)
@@ -49,16 +177,14 @@ def main():
 
     State = aggregator_pb2.SafetyState
     Kind = aggregator_pb2.SafetyCause.Kind
-    timeout_s = args.timeout_ms / 1000.0
     t0 = time.monotonic()
-    lock = threading.Lock()
-    shared = {"last_arrival": None, "halted": True, "reason": "not started", "stream_open": False}
-    counts = collections.Counter()
+    lock = threading.Lock()  # the monitor; never held while printing
+    monitor = Monitor(args.robot, args.timeout_ms / 1000.0, now=t0)
+    lines = queue.Queue()  # printed by the main thread, in the order the decisions were made
     gaps = {"max_s": 0.0}
     done = threading.Event()
-
-    def say(text):
-        print(f"t={time.monotonic() - t0:.3f} s {text}", flush=True)
+    cancel_after_s = 0.5
+    current = {"call": None, "cancelled_for_silence": False}
 
     def describe(s):
         name = State.State.Name(s.state) if s.state in State.State.values() else f"UNKNOWN({s.state})"
@@ -72,17 +198,28 @@ def main():
                 text += f" {s.cause.force_n:.2f} N"
         return text
 
-    def halt(reason):  # with the lock held
-        if not shared["halted"] or shared["reason"] != reason:
-            say(f"HALT {reason}")
-        shared["halted"], shared["reason"] = True, reason
+    def tell(event, now):  # with the lock held: queue the decision's line
+        if event is None:
+            return
+        kind, reason, detail, s = event
+        if kind == "CLEAR":
+            text = "CLEAR: may move"
+        else:
+            text = f"HALT {reason}: " + (describe(s) if reason in ("STOP", "FAULT", "UNKNOWN_STATE") and s is not None
+                                         else detail)
+        lines.put(f"t={now - t0:.3f} s {text}")
 
-    # Reconnect quickly: gRPC's default backoff is 1 s growing to 120 s.
+    # Reconnect quickly (gRPC's default backoff is 1 s growing to 120 s), keepalive pings every 1 s even
+    # without calls or data, and a subchannel pool of its own so a new channel dials a new connection.
     options = [("grpc.initial_reconnect_backoff_ms", 100), ("grpc.min_reconnect_backoff_ms", 100),
-               ("grpc.max_reconnect_backoff_ms", 1000)]
+               ("grpc.max_reconnect_backoff_ms", 1000), ("grpc.keepalive_time_ms", 1000),
+               ("grpc.keepalive_timeout_ms", 1000), ("grpc.keepalive_permit_without_calls", 1),
+               ("grpc.http2.max_pings_without_data", 0), ("grpc.use_local_subchannel_pool", 1)]
     if args.insecure:
         print("--insecure: PLAINTEXT gRPC, no TLS and no identity", file=sys.stderr, flush=True)
-        channel = grpc.insecure_channel(args.aggregator, options=options)
+
+        def make_channel():
+            return grpc.insecure_channel(args.aggregator, options=options)
     else:
         def read(name):
             with open(os.path.join(args.tls_dir, name), "rb") as f:
@@ -90,58 +227,59 @@ def main():
         own = "controller" if os.path.exists(os.path.join(args.tls_dir, "controller.crt")) else "tls"
         creds = grpc.ssl_channel_credentials(root_certificates=read("ca.crt"), private_key=read(own + ".key"),
                                              certificate_chain=read(own + ".crt"))
-        channel = grpc.secure_channel(args.aggregator, creds, options=options)
-    stub = aggregator_pb2_grpc.AggregatorStub(channel)
-    calls = []
+
+        def make_channel():
+            return grpc.secure_channel(args.aggregator, creds, options=options)
 
     def reader():
-        pause = 0.1
+        pause, channel = 0.1, None
+        remake = True
         while not done.is_set():
+            if remake:
+                if channel is not None:
+                    channel.close()
+                channel = make_channel()
+                stub = aggregator_pb2_grpc.AggregatorStub(channel)
             call = stub.WatchSafety(aggregator_pb2.WatchSafetyRequest(subscriber=args.subscriber))
-            calls.append(call)
             with lock:
-                shared["stream_open"], shared["last_arrival"] = True, time.monotonic()
-            previous, streak, got_any = None, 0, False
+                current["call"], current["cancelled_for_silence"] = call, False
+                monitor.on_stream_opened(time.monotonic())
+            got_any, previous, code = False, None, "OK"
             try:
                 for s in call:
                     now = time.monotonic()
                     with lock:
                         if got_any:
-                            gaps["max_s"] = max(gaps["max_s"], now - shared["last_arrival"])
+                            gaps["max_s"] = max(gaps["max_s"], now - monitor.last_evidence)
                         got_any = True
-                        shared["last_arrival"] = now
-                        counts[s.state] += 1
-                        key = (s.state, s.stop_epoch, s.aggregator_start_t_ns)
+                        key = (s.state, s.stop_epoch, s.aggregator_run_id, s.aggregator_start_t_ns, s.robot_name)
                         if key != previous:
-                            say(describe(s))
+                            lines.put(f"t={now - t0:.3f} s {describe(s)}")
                             previous = key
-                        if s.state == State.STATE_CLEAR:
-                            streak += 1
-                            if shared["halted"] and streak >= 3:  # three CLEARs in a row on a live stream
-                                shared["halted"] = False
-                                say("CLEAR: may move")
-                        else:
-                            streak = 0
-                            halt(describe(s))
+                        tell(monitor.on_state(s, now), now)
             except grpc.RpcError as e:
-                if done.is_set():
-                    break
-                with lock:
-                    halt(("stream ended: " if got_any else "no stream: ") + e.code().name)
+                code = e.code().name
+            if done.is_set():
+                break
             with lock:
-                shared["stream_open"] = False
-                if not done.is_set():
-                    halt("stream ended")
+                current["call"] = None
+                now = time.monotonic()
+                tell(monitor.on_stream_ended(code, now), now)
+                remake = current["cancelled_for_silence"] or code == "UNAVAILABLE"
             pause = 0.1 if got_any else min(pause * 2, 1.0)
             done.wait(pause)
+        if channel is not None:
+            channel.close()
 
     def watchdog():
         while not done.wait(0.001):
             with lock:
-                if shared["stream_open"] and shared["last_arrival"] is not None:
-                    silence = time.monotonic() - shared["last_arrival"]
-                    if silence > timeout_s and not (shared["halted"] and shared["reason"].startswith("no heartbeat")):
-                        halt(f"no heartbeat for {silence * 1000:.1f} ms")
+                now = time.monotonic()
+                tell(monitor.on_tick(now), now)
+                call = current["call"]
+                if call is not None and monitor.silence(now) > cancel_after_s and not current["cancelled_for_silence"]:
+                    current["cancelled_for_silence"] = True
+                    call.cancel()
 
     signal.signal(signal.SIGINT, lambda *_: done.set())
     signal.signal(signal.SIGTERM, lambda *_: done.set())
@@ -149,19 +287,35 @@ def main():
     for t in threads:
         t.start()
     deadline = t0 + args.duration_s if args.duration_s > 0 else None
+
+    def flush():
+        while True:
+            try:
+                print(lines.get_nowait(), flush=True)
+            except queue.Empty:
+                return
+
     while not done.is_set():
         if deadline is not None and time.monotonic() >= deadline:
             done.set()
             break
-        done.wait(0.05)
-    for call in calls:
+        try:
+            print(lines.get(timeout=0.05), flush=True)
+        except queue.Empty:
+            pass
+    with lock:
+        call = current["call"]
+    if call is not None:
         call.cancel()
     for t in threads:
         t.join(timeout=2)
-    channel.close()
-    by_state = ", ".join(f"{State.State.Name(k).replace('STATE_', '')} {v}" for k, v in sorted(counts.items()))
-    print(f"received {sum(counts.values())} states ({by_state or 'none'}), longest gap "
-          f"{gaps['max_s'] * 1000:.1f} ms, halted at exit: {shared['halted']}", flush=True)
+    flush()
+    counts = monitor.counts
+    by_state = ", ".join(f"{State.State.Name(k).replace('STATE_', '') if k in State.State.values() else k} {v}"
+                         for k, v in sorted(((k, v) for k, v in counts.items() if k != "refused"), key=str))
+    print(f"received {sum(v for k, v in counts.items() if k != 'refused')} states ({by_state or 'none'}), "
+          f"refused {counts['refused']}, longest gap {gaps['max_s'] * 1000:.1f} ms, halted at exit: {monitor.halted}",
+          flush=True)
     return 0
 
 
