@@ -59,6 +59,8 @@ std::string_view HaltReasonName(HaltReason reason) noexcept {
     case HaltReason::kConnectFailed: return "CONNECT_FAILED";
     case HaltReason::kWrongRobot: return "WRONG_ROBOT";
     case HaltReason::kNewRun: return "NEW_RUN";
+    case HaltReason::kLinkError: return "LINK_ERROR";
+    case HaltReason::kLate: return "LATE";
   }
   return "?";
 }
@@ -140,13 +142,36 @@ SafetyMonitor::Action SafetyMonitor::OnStreamOpened(SteadyClock::time_point now)
   last_evidence_ = now;
   clear_streak_ = 0;
   ++stats_.streams_opened;
+  link_.reset();  // a new stream learns its sender anew (run id, sequence, clock offset)
+  link_latched_ = false;
   return {};
 }
 
-StateVerdict SafetyMonitor::CheckState(const v1::SafetyState& s, SteadyClock::time_point /*arrival*/) {
-  if (s.robot_name() != config_.robot_name) {
-    return StateVerdict::Discard(HaltReason::kWrongRobot, "a state for robot '" + s.robot_name() +
-                                                              "', not this controller's '" + config_.robot_name + "'");
+// Every received state passes here first: the safety layer (patches/channel: CRC, addressee, run, sequence,
+// freshness; docs/safety-channel.md), then nothing else. A discarded state halts.
+StateVerdict SafetyMonitor::CheckState(const v1::SafetyState& s, SteadyClock::time_point arrival) {
+  if (!link_) link_.emplace(config_.link, config_.robot_name);
+  const channel::Verdict v = link_->Receive(
+      s, std::chrono::duration_cast<std::chrono::nanoseconds>(arrival.time_since_epoch()).count());
+  if (v.error) stats_.link_errors.Count(v.kind);
+  if (v.rate_latch) link_latched_ = true;
+  if (!v.use) {
+    if (v.kind == channel::Error::kAddressing) {
+      return StateVerdict::Discard(HaltReason::kWrongRobot, "a state for robot '" + s.robot_name() +
+                                                                "', not this controller's '" + config_.robot_name + "'");
+    }
+    if (v.kind == channel::Error::kDelay) {
+      return StateVerdict::Discard(HaltReason::kLate,
+                                   "a state " + std::to_string(v.age_ns / 1'000'000) + " ms old (budget " +
+                                       std::to_string(config_.link.freshness.budget_ns / 1'000'000) + " ms)");
+    }
+    return StateVerdict::Discard(HaltReason::kLinkError,
+                                 "the safety layer discarded a state: " + std::string(channel::Name(v.kind)) +
+                                     (link_latched_ ? " (error-rate limit reached: no state of this stream is used)" : ""));
+  }
+  if (link_latched_) {
+    return StateVerdict::Discard(HaltReason::kLinkError,
+                                 "the error-rate limit was reached on this stream: no state of it is used");
   }
   return StateVerdict::Accept();
 }

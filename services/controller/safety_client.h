@@ -38,11 +38,13 @@
 #include <memory>
 #include <mutex>
 #include <span>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <thread>
 #include <vector>
 
+#include "ruffini/channel/checkers.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 
 namespace ruffini::controller {
@@ -61,10 +63,13 @@ enum class HaltReason : int {
   kConnectFailed = 7,// the WatchSafety stream ended before its first state (nothing listening, refused, ...)
   kWrongRobot = 8,   // a state for another robot (robot_name is not MonitorConfig::robot_name): discarded
   kNewRun = 9,       // a CLEAR from a new aggregator run (a restart, or another aggregator): clean states again
+  kLinkError = 10,   // the safety layer discarded a state (corruption, repetition, incorrect sequence, insertion;
+                     // docs/safety-channel.md); after the error-rate limit, every state until a new stream
+  kLate = 11,        // a state older than the freshness budget (unacceptable delay): discarded
 };
-inline constexpr int kHaltReasonCount = 10;
+inline constexpr int kHaltReasonCount = 12;
 // "NOT_STARTED", "STOP", "FAULT", "UNKNOWN_STATE", "MISSED_STOP", "NO_HEARTBEAT", "STREAM_ENDED",
-// "CONNECT_FAILED", "WRONG_ROBOT", "NEW_RUN".
+// "CONNECT_FAILED", "WRONG_ROBOT", "NEW_RUN", "LINK_ERROR", "LATE".
 std::string_view HaltReasonName(HaltReason reason) noexcept;
 
 // A decision to stop the robot.
@@ -89,6 +94,7 @@ struct SafetyStats {
   std::uint64_t discarded = 0;        // of those, discarded by CheckState (each one also halts)
   std::array<std::uint64_t, kHaltReasonCount> discarded_by{};  // discarded states by the HaltReason they caused
   std::uint64_t skipped_states = 0;   // seq gaps within one aggregator run (latest-value slots skip states)
+  ruffini::channel::ErrorCounts link_errors;  // the safety layer's detections by error (loss included)
   std::uint64_t streams_opened = 0;   // WatchSafety calls started
   std::uint64_t channels_created = 0; // gRPC channels made (SafetyClient: the first and every re-creation)
   std::uint64_t clears = 0;           // clear decisions
@@ -107,6 +113,9 @@ struct MonitorConfig {
   std::string robot_name;
   std::chrono::nanoseconds heartbeat_timeout = std::chrono::milliseconds(30);  // silence longer than this halts
   int states_before_clear = 3;  // clean CLEAR states in a row before a clear (>= 1)
+  // The safety layer (docs/safety-channel.md): the freshness budget of a state (its sender steady time against
+  // its arrival, the offset learned per stream) and the error-rate rule (errors within a window, per stream).
+  ruffini::channel::LinkConfig link{};
 };
 
 // The verdict of SafetyMonitor::CheckState on one received state.
@@ -187,6 +196,8 @@ class SafetyMonitor {
   bool have_epoch_ = false;                // last_epoch_ is known (within run_)
   std::uint64_t last_epoch_ = 0;           // stop_epoch of the newest accepted state
   std::array<bool, kHaltReasonCount> discard_reason_{};  // halt reasons CheckState has used
+  std::optional<ruffini::channel::StateLinkCheck> link_;  // this stream's safety-layer receiver
+  bool link_latched_ = false;              // the error-rate limit was reached on this stream
   SafetyStats stats_;
 };
 

@@ -2,6 +2,9 @@
 // steady-clock time, so the watchdog's 30 ms is exact here.
 #include <gtest/gtest.h>
 
+#include <functional>
+
+#include "ruffini/channel/crc.h"
 #include "safety_client.h"
 
 namespace {
@@ -35,6 +38,13 @@ v1::SafetyState State(v1::SafetyState::State s, std::uint64_t epoch, std::uint64
   }
   return m;
 }
+// The aggregator's part of the safety layer: a state sent at `t` (the test's clock stands for the
+// aggregator's steady clock, so the learned offset is 0), sealed, and handed to the monitor at `t`.
+rc::SafetyMonitor::Action Feed(rc::SafetyMonitor& m, v1::SafetyState s, rc::SteadyClock::time_point t) {
+  s.set_sender_steady_ns(std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count());
+  ruffini::channel::Seal(s);
+  return m.OnState(s, t);
+}
 constexpr auto kClear = v1::SafetyState::STATE_CLEAR;
 constexpr auto kStop = v1::SafetyState::STATE_STOP;
 constexpr auto kFault = v1::SafetyState::STATE_FAULT;
@@ -44,7 +54,7 @@ rc::SteadyClock::time_point ClearUp(rc::SafetyMonitor& m, rc::SteadyClock::time_
                                     std::uint64_t& seq) {
   for (int i = 0; i < 10; ++i) {
     t += 10ms;
-    if (m.OnState(State(kClear, epoch, ++seq), t).kind == Kind::kClear) return t;
+    if (Feed(m, State(kClear, epoch, ++seq), t).kind == Kind::kClear) return t;
   }
   ADD_FAILURE() << "never cleared";
   return t;
@@ -55,9 +65,9 @@ TEST(SafetyMonitor, StartsHaltedAndClearsOnlyAfterThreeClearStatesOnALiveStream)
   EXPECT_TRUE(m.halted());
   EXPECT_EQ(m.reason(), rc::HaltReason::kNotStarted);
   m.OnStreamOpened(kT0);
-  EXPECT_EQ(m.OnState(State(kClear, 1, 1), kT0 + 1ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, 2), kT0 + 11ms).kind, Kind::kNone);
-  const auto a = m.OnState(State(kClear, 1, 3), kT0 + 21ms);
+  EXPECT_EQ(Feed(m, State(kClear, 1, 1), kT0 + 1ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, 2), kT0 + 11ms).kind, Kind::kNone);
+  const auto a = Feed(m, State(kClear, 1, 3), kT0 + 21ms);
   ASSERT_EQ(a.kind, Kind::kClear);
   EXPECT_EQ(a.clear.halted_for, 21ms);
   EXPECT_FALSE(m.halted());
@@ -67,13 +77,13 @@ TEST(SafetyMonitor, StartsHaltedAndClearsOnlyAfterThreeClearStatesOnALiveStream)
 TEST(SafetyMonitor, AStreamEndInTheMiddleOfTheClearStreakStartsItAgain) {
   rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
-  m.OnState(State(kClear, 1, 1), kT0 + 1ms);
-  m.OnState(State(kClear, 1, 2), kT0 + 11ms);
+  Feed(m, State(kClear, 1, 1), kT0 + 1ms);
+  Feed(m, State(kClear, 1, 2), kT0 + 11ms);
   EXPECT_EQ(m.OnStreamEnded("UNAVAILABLE", kT0 + 12ms).kind, Kind::kHalt);
   m.OnStreamOpened(kT0 + 112ms);
-  EXPECT_EQ(m.OnState(State(kClear, 1, 5), kT0 + 113ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, 6), kT0 + 123ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, 7), kT0 + 133ms).kind, Kind::kClear);
+  EXPECT_EQ(Feed(m, State(kClear, 1, 5), kT0 + 113ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, 6), kT0 + 123ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, 7), kT0 + 133ms).kind, Kind::kClear);
 }
 
 TEST(SafetyMonitor, StopHaltsAtOnceAndNamesTheCause) {
@@ -81,19 +91,19 @@ TEST(SafetyMonitor, StopHaltsAtOnceAndNamesTheCause) {
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 2, seq);
-  const auto a = m.OnState(State(kStop, 3, ++seq), t + 10ms);
+  const auto a = Feed(m, State(kStop, 3, ++seq), t + 10ms);
   ASSERT_EQ(a.kind, Kind::kHalt);
   EXPECT_EQ(a.halt.reason, rc::HaltReason::kStop);
   EXPECT_EQ(a.halt.detail, "STOP epoch 3 cause contact upper_arm_a 1.60 N > 1.50 N");
   EXPECT_EQ(a.halt.state.stop_epoch(), 3u);
   // The same STOP again (a heartbeat) is no new decision; a FAULT under a new epoch is.
-  EXPECT_EQ(m.OnState(State(kStop, 3, ++seq), t + 20ms).kind, Kind::kNone);
-  const auto f = m.OnState(State(kFault, 4, ++seq), t + 30ms);
+  EXPECT_EQ(Feed(m, State(kStop, 3, ++seq), t + 20ms).kind, Kind::kNone);
+  const auto f = Feed(m, State(kFault, 4, ++seq), t + 30ms);
   ASSERT_EQ(f.kind, Kind::kHalt);
   EXPECT_EQ(f.halt.reason, rc::HaltReason::kFault);
   // Another STOP epoch while halted for STOP is reported too.
-  EXPECT_EQ(m.OnState(State(kStop, 5, ++seq), t + 40ms).halt.reason, rc::HaltReason::kStop);
-  EXPECT_EQ(m.OnState(State(kStop, 6, ++seq), t + 50ms).kind, Kind::kHalt);
+  EXPECT_EQ(Feed(m, State(kStop, 5, ++seq), t + 40ms).halt.reason, rc::HaltReason::kStop);
+  EXPECT_EQ(Feed(m, State(kStop, 6, ++seq), t + 50ms).kind, Kind::kHalt);
   const auto st = m.Stats(t + 50ms);
   EXPECT_EQ(st.halts[static_cast<int>(rc::HaltReason::kStop)], 3u);
   EXPECT_EQ(st.halts[static_cast<int>(rc::HaltReason::kFault)], 1u);
@@ -111,7 +121,7 @@ TEST(SafetyMonitor, AnUnknownStateIsAStop) {
     v1::SafetyState s = State(kClear, 1, ++seq);
     // Through reflection: the setter refuses a value the enum does not name; the wire does not.
     s.GetReflection()->SetEnumValue(&s, s.GetDescriptor()->FindFieldByName("state"), v);
-    const auto a = m.OnState(s, t + 10ms);
+    const auto a = Feed(m, s, t + 10ms);
     EXPECT_TRUE(m.halted());
     ASSERT_EQ(a.kind, Kind::kHalt);
     EXPECT_EQ(a.halt.reason, rc::HaltReason::kUnknownState);
@@ -132,20 +142,20 @@ TEST(SafetyMonitor, SilenceLongerThan30MsHaltsOnceThenAStateChangesTheReason) {
   EXPECT_EQ(m.OnTick(t + 60ms).kind, Kind::kNone);  // once, not every tick
   // Heartbeats again: CLEAR needs its streak on the live stream, after the state that ended the silence.
   t += 200ms;
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 10ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 30ms).kind, Kind::kClear);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t + 10ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t + 20ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t + 30ms).kind, Kind::kClear);
   EXPECT_EQ(m.Stats(t + 30ms).max_state_gap, 200ms);
 }
 
 TEST(SafetyMonitor, WhileHaltedForFaultSilenceIsReportedAndTheNextFaultIsToo) {
   rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
-  EXPECT_EQ(m.OnState(State(kFault, 1, 1), kT0 + 1ms).halt.reason, rc::HaltReason::kFault);
-  EXPECT_EQ(m.OnState(State(kFault, 1, 2), kT0 + 11ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kFault, 1, 1), kT0 + 1ms).halt.reason, rc::HaltReason::kFault);
+  EXPECT_EQ(Feed(m, State(kFault, 1, 2), kT0 + 11ms).kind, Kind::kNone);
   EXPECT_EQ(m.OnTick(kT0 + 42ms).halt.reason, rc::HaltReason::kNoHeartbeat);
-  EXPECT_EQ(m.OnState(State(kFault, 1, 3), kT0 + 100ms).halt.reason, rc::HaltReason::kFault);
+  EXPECT_EQ(Feed(m, State(kFault, 1, 3), kT0 + 100ms).halt.reason, rc::HaltReason::kFault);
   EXPECT_TRUE(m.halted());
 }
 
@@ -183,7 +193,7 @@ TEST(SafetyMonitor, AClearUnderANewEpochMeansAStopWasMissed) {
   auto t = ClearUp(m, kT0, 2, seq);
   // The states of epoch 3 (STOP, then its reset) were skipped: seq jumps, the epoch grew.
   seq += 5;
-  const auto a = m.OnState(State(kClear, 3, ++seq), t + 10ms);
+  const auto a = Feed(m, State(kClear, 3, ++seq), t + 10ms);
   ASSERT_EQ(a.kind, Kind::kHalt);
   EXPECT_EQ(a.halt.reason, rc::HaltReason::kMissedStop);
   EXPECT_EQ(m.Stats(t + 10ms).skipped_states, 5u);
@@ -198,11 +208,11 @@ TEST(SafetyMonitor, ARestartedAggregatorCountsEpochsAgainWithoutAFalseMissedStop
   auto t = ClearUp(m, kT0, 5, seq);
   m.OnStreamEnded("UNAVAILABLE", t + 1ms);
   m.OnStreamOpened(t + 100ms);
-  EXPECT_EQ(m.OnState(State(kFault, 1, 1, /*run=*/43), t + 101ms).halt.reason, rc::HaltReason::kFault);
+  EXPECT_EQ(Feed(m, State(kFault, 1, 1, /*run=*/43), t + 101ms).halt.reason, rc::HaltReason::kFault);
   std::uint64_t seq2 = 1;
   t = t + 101ms;
-  for (int i = 0; i < 2; ++i) EXPECT_EQ(m.OnState(State(kClear, 1, ++seq2, 43), t += 10ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq2, 43), t += 10ms).kind, Kind::kClear);
+  for (int i = 0; i < 2; ++i) EXPECT_EQ(Feed(m, State(kClear, 1, ++seq2, 43), t += 10ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq2, 43), t += 10ms).kind, Kind::kClear);
   EXPECT_EQ(m.Stats(t).skipped_states, 0u);
 }
 
@@ -212,14 +222,14 @@ TEST(SafetyMonitor, TimeHaltedAddsUp) {
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 1, seq);  // halted 30 ms
   EXPECT_EQ(t, kT0 + 30ms);
-  m.OnState(State(kStop, 2, ++seq), t + 100ms);
+  Feed(m, State(kStop, 2, ++seq), t + 100ms);
   EXPECT_EQ(m.Stats(t + 150ms).time_halted, 30ms + 50ms);
 }
 
 TEST(SafetyMonitor, TheTimeoutAndTheStreakAreConfigurable) {
   rc::SafetyMonitor m({.robot_name = kRobot, .heartbeat_timeout = 50ms, .states_before_clear = 1}, kT0);
   m.OnStreamOpened(kT0);
-  EXPECT_EQ(m.OnState(State(kClear, 1, 1), kT0 + 1ms).kind, Kind::kClear);
+  EXPECT_EQ(Feed(m, State(kClear, 1, 1), kT0 + 1ms).kind, Kind::kClear);
   EXPECT_EQ(m.OnTick(kT0 + 40ms).kind, Kind::kNone);
   EXPECT_EQ(m.OnTick(kT0 + 52ms).kind, Kind::kHalt);
 }
@@ -236,16 +246,16 @@ TEST(SafetyMonitor, AfterALinkHaltCleanStatesMustFollowEachOtherWithinTheWatchdo
   // CLEARs one second apart, the watchdog ticking in between as the client's does: never a clear.
   for (int i = 0; i < 6; ++i) {
     t += 1s;
-    EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t).kind, Kind::kNone) << i;
+    EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t).kind, Kind::kNone) << i;
     EXPECT_EQ(m.OnTick(t + 31ms).kind, Kind::kNone);  // told once
   }
   EXPECT_TRUE(m.halted());
   // Then three within the watchdog after the late one: released.
   t += 1s;
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 10ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 20ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 1, ++seq), t + 30ms).kind, Kind::kClear);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t + 10ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t + 20ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t + 30ms).kind, Kind::kClear);
 }
 
 // The same rule when no watchdog tick came in between (a starved watchdog thread): a late CLEAR starts the
@@ -255,14 +265,14 @@ TEST(SafetyMonitor, LateCleanStatesDoNotAddUpEvenWithoutAWatchdogTick) {
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 1, seq);
-  EXPECT_EQ(m.OnState(State(kStop, 2, ++seq), t + 10ms).halt.reason, rc::HaltReason::kStop);
+  EXPECT_EQ(Feed(m, State(kStop, 2, ++seq), t + 10ms).halt.reason, rc::HaltReason::kStop);
   t += 10ms;
-  for (int i = 0; i < 10; ++i) EXPECT_NE(m.OnState(State(kClear, 2, ++seq), t += 31ms).kind, Kind::kClear) << i;
+  for (int i = 0; i < 10; ++i) EXPECT_NE(Feed(m, State(kClear, 2, ++seq), t += 31ms).kind, Kind::kClear) << i;
   EXPECT_EQ(m.reason(), rc::HaltReason::kNoHeartbeat);  // the late state itself tells of the silence
   // The late CLEAR is not clean itself; three more within the watchdog (30 ms exactly is within) release.
-  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 2, ++seq), t += 30ms).kind, Kind::kClear);
+  EXPECT_EQ(Feed(m, State(kClear, 2, ++seq), t += 30ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 2, ++seq), t += 30ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 2, ++seq), t += 30ms).kind, Kind::kClear);
 }
 
 TEST(SafetyMonitor, AStateForAnotherRobotIsDiscardedCountedAndHalts) {
@@ -270,14 +280,14 @@ TEST(SafetyMonitor, AStateForAnotherRobotIsDiscardedCountedAndHalts) {
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 1, seq);
-  const auto a = m.OnState(State(kClear, 1, ++seq, 42, "other-cell"), t += 10ms);
+  const auto a = Feed(m, State(kClear, 1, ++seq, 42, "other-cell"), t += 10ms);
   ASSERT_EQ(a.kind, Kind::kHalt);
   EXPECT_EQ(a.halt.reason, rc::HaltReason::kWrongRobot);
   EXPECT_EQ(a.halt.state.robot_name(), "other-cell");
   EXPECT_EQ(a.halt.detail, "a state for robot 'other-cell', not this controller's 'cobot'");
   // An empty name (an aggregator that does not fill it) is another robot too; CLEARs from it never release.
   for (int i = 0; i < 10; ++i) {
-    const auto b = m.OnState(State(kClear, 1, ++seq, 42, ""), t += 10ms);
+    const auto b = Feed(m, State(kClear, 1, ++seq, 42, ""), t += 10ms);
     EXPECT_NE(b.kind, Kind::kClear);
   }
   EXPECT_TRUE(m.halted());
@@ -289,12 +299,20 @@ TEST(SafetyMonitor, AStateForAnotherRobotIsDiscardedCountedAndHalts) {
   EXPECT_EQ(st.last_state.robot_name(), kRobot);                          // discarded states are not kept
   // A discarded state is no heartbeat: the watchdog counts from the last accepted one.
   EXPECT_GT(m.Silence(t), 30ms);
-  // Our robot's states again: three clean ones release.
+  // Misaddressed states are identity errors of the safety layer: past the error-rate limit (two within the
+  // window) no state of this stream is used, our robot's included (docs/safety-channel.md).
+  EXPECT_NE(Feed(m, State(kClear, 1, ++seq), t += 10ms).kind, Kind::kClear);
+  EXPECT_TRUE(m.halted());
+  EXPECT_EQ(m.Stats(t).discarded_by[static_cast<int>(rc::HaltReason::kLinkError)], 1u);
+  // A new stream: our robot's states again, three clean ones release.
+  m.OnStreamEnded("CANCELLED", t += 1ms);
+  m.OnStreamOpened(t += 100ms);
   t = ClearUp(m, t, 1, seq);
   EXPECT_FALSE(m.halted());
   st = m.Stats(t);
-  EXPECT_EQ(st.discarded, 11u);
+  EXPECT_EQ(st.discarded, 12u);
   EXPECT_EQ(st.states, seq);
+  EXPECT_EQ(st.link_errors[ruffini::channel::Error::kAddressing], 11u);
 }
 
 TEST(SafetyMonitor, TheRobotNameIsRequired) {
@@ -310,19 +328,30 @@ TEST(SafetyMonitor, ACleanStateFromANewRunHaltsUntilThreeCleanStatesOfThatRun) {
   auto t = ClearUp(m, kT0, 6, seq);
   v1::SafetyState s = State(kClear, 6, ++seq);
   s.set_aggregator_run_id(s.aggregator_run_id() + 1);
-  const auto a = m.OnState(s, t += 10ms);
+  // Within one stream another run's state is an insertion (the safety layer discards it); a new run comes
+  // on a new stream (the old aggregator's stream ended).
+  EXPECT_EQ(Feed(m, s, t += 10ms).halt.reason, rc::HaltReason::kLinkError);
+  m.OnStreamEnded("UNAVAILABLE", t += 1ms);
+  m.OnStreamOpened(t += 1ms);
+  t = ClearUp(m, t, 6, seq);
+  EXPECT_FALSE(m.halted()) << "the same run on a new stream: three clean states";
+  m.OnStreamEnded("UNAVAILABLE", t += 1ms);
+  m.OnStreamOpened(t += 1ms);
+  s.set_seq(++seq);
+  const auto a = Feed(m, s, t += 10ms);
   ASSERT_EQ(a.kind, Kind::kHalt);
   EXPECT_EQ(a.halt.reason, rc::HaltReason::kNewRun);
   for (int i = 0; i < 2; ++i) {
     s.set_seq(++seq);
-    EXPECT_EQ(m.OnState(s, t += 10ms).kind, Kind::kNone);
+    EXPECT_EQ(Feed(m, s, t += 10ms).kind, Kind::kNone);
   }
   s.set_seq(++seq);
-  EXPECT_EQ(m.OnState(s, t += 10ms).kind, Kind::kClear);  // three clean states of the new run after the halt
+  EXPECT_EQ(Feed(m, s, t += 10ms).kind, Kind::kClear);  // three clean states of the new run after the halt
   // Now the start time alone changes.
   s.set_aggregator_start_t_ns(s.aggregator_start_t_ns() + 1);
   s.set_stop_epoch(1);
-  EXPECT_EQ(m.OnState(s, t += 10ms).halt.reason, rc::HaltReason::kNewRun);
+  s.set_seq(++seq);
+  EXPECT_EQ(Feed(m, s, t += 10ms).halt.reason, rc::HaltReason::kNewRun);
 }
 
 TEST(SafetyMonitor, AClearUnderANewEpochIsAMissedStopWhileHaltedToo) {
@@ -330,12 +359,12 @@ TEST(SafetyMonitor, AClearUnderANewEpochIsAMissedStopWhileHaltedToo) {
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
   auto t = ClearUp(m, kT0, 2, seq);
-  EXPECT_EQ(m.OnState(State(kStop, 3, ++seq), t += 10ms).halt.reason, rc::HaltReason::kStop);
+  EXPECT_EQ(Feed(m, State(kStop, 3, ++seq), t += 10ms).halt.reason, rc::HaltReason::kStop);
   // Epoch 4's STOP and its reset were skipped: the CLEAR of epoch 4 is a missed stop, and the streak starts after it.
-  EXPECT_EQ(m.OnState(State(kClear, 4, ++seq), t += 10ms).halt.reason, rc::HaltReason::kMissedStop);
-  EXPECT_EQ(m.OnState(State(kClear, 4, ++seq), t += 10ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 4, ++seq), t += 10ms).kind, Kind::kNone);
-  EXPECT_EQ(m.OnState(State(kClear, 4, ++seq), t += 10ms).kind, Kind::kClear);
+  EXPECT_EQ(Feed(m, State(kClear, 4, ++seq), t += 10ms).halt.reason, rc::HaltReason::kMissedStop);
+  EXPECT_EQ(Feed(m, State(kClear, 4, ++seq), t += 10ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 4, ++seq), t += 10ms).kind, Kind::kNone);
+  EXPECT_EQ(Feed(m, State(kClear, 4, ++seq), t += 10ms).kind, Kind::kClear);
 }
 
 TEST(SafetyMonitor, ReasonNames) {
@@ -348,3 +377,101 @@ TEST(SafetyMonitor, ReasonNames) {
 }
 
 }  // namespace
+
+// The safety layer at the controller (docs/safety-channel.md), one row per error: what the client does.
+TEST(SafetyMonitorLink, EachErrorOnTheStateLinkIsDetectedCountedAndAnsweredAsStated) {
+  using ruffini::channel::Error;
+  struct Row {
+    const char* what;
+    Error error;
+    rc::HaltReason halt;  // kNotStarted: no halt (tolerated)
+    std::function<v1::SafetyState(v1::SafetyState, std::uint64_t& seq, rc::SteadyClock::time_point t)> alter;
+  };
+  auto sealed_at = [](v1::SafetyState s, rc::SteadyClock::time_point sent) {
+    s.set_sender_steady_ns(std::chrono::duration_cast<std::chrono::nanoseconds>(sent.time_since_epoch()).count());
+    ruffini::channel::Seal(s);
+    return s;
+  };
+  const std::vector<Row> rows = {
+      {"a STOP corrupted into a CLEAR", Error::kCorruption, rc::HaltReason::kLinkError,
+       [&](v1::SafetyState s, std::uint64_t&, rc::SteadyClock::time_point t) {
+         s.set_state(kStop);
+         s = sealed_at(s, t);
+         s.set_state(kClear);
+         return s;
+       }},
+      {"the previous state again", Error::kRepetition, rc::HaltReason::kLinkError,
+       [&](v1::SafetyState s, std::uint64_t& seq, rc::SteadyClock::time_point t) {
+         s.set_seq(seq);  // not advanced
+         return sealed_at(s, t);
+       }},
+      {"an older state", Error::kIncorrectSequence, rc::HaltReason::kLinkError,
+       [&](v1::SafetyState s, std::uint64_t& seq, rc::SteadyClock::time_point t) {
+         s.set_seq(seq - 1);
+         return sealed_at(s, t);
+       }},
+      {"states skipped", Error::kLoss, rc::HaltReason::kNotStarted,
+       [&](v1::SafetyState s, std::uint64_t& seq, rc::SteadyClock::time_point t) {
+         seq += 3;
+         s.set_seq(seq);
+         return sealed_at(s, t);
+       }},
+      {"a CLEAR 25 ms old", Error::kDelay, rc::HaltReason::kLate,
+       [&](v1::SafetyState s, std::uint64_t& seq, rc::SteadyClock::time_point t) {
+         s.set_seq(++seq);
+         return sealed_at(s, t - 25ms);
+       }},
+      {"a state of another aggregator run", Error::kInsertion, rc::HaltReason::kLinkError,
+       [&](v1::SafetyState s, std::uint64_t& seq, rc::SteadyClock::time_point t) {
+         s.set_seq(seq + 1);
+         s.set_aggregator_run_id(s.aggregator_run_id() ^ 0xFF);
+         return sealed_at(s, t);
+       }},
+      {"a state for another robot", Error::kAddressing, rc::HaltReason::kWrongRobot,
+       [&](v1::SafetyState s, std::uint64_t& seq, rc::SteadyClock::time_point t) {
+         s.set_seq(seq + 1);
+         s.set_robot_name("other-cell");
+         return sealed_at(s, t);
+       }},
+  };
+  for (const Row& row : rows) {
+    SCOPED_TRACE(row.what);
+    rc::SafetyMonitor m(kConfig, kT0);
+    m.OnStreamOpened(kT0);
+    std::uint64_t seq = 0;
+    auto t = ClearUp(m, kT0, 1, seq);
+    ASSERT_FALSE(m.halted());
+    const v1::SafetyState bad = row.alter(State(kClear, 1, seq), seq, t += 10ms);
+    const auto a = m.OnState(bad, t);
+    EXPECT_EQ(m.Stats(t).link_errors[row.error], 1u);
+    if (row.halt == rc::HaltReason::kNotStarted) {
+      EXPECT_FALSE(m.halted()) << "tolerated";
+      EXPECT_NE(a.kind, Kind::kHalt);
+    } else {
+      ASSERT_EQ(a.kind, Kind::kHalt);
+      EXPECT_EQ(a.halt.reason, row.halt);
+      EXPECT_TRUE(m.halted());
+      // Three good states later (not counting the one seq the error may have used) the robot may move.
+      seq = std::max(seq, bad.seq());
+      t = ClearUp(m, t, 1, seq);
+      EXPECT_FALSE(m.halted());
+    }
+  }
+}
+
+TEST(SafetyMonitorLink, TwoErrorsWithinTheWindowRefuseTheWholeStreamUntilANewOne) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 0;
+  auto t = ClearUp(m, kT0, 1, seq);
+  EXPECT_EQ(Feed(m, State(kClear, 1, seq), t += 10ms).halt.reason, rc::HaltReason::kLinkError);
+  t = ClearUp(m, t, 1, seq);
+  EXPECT_FALSE(m.halted()) << "one error: discarded, three clean states release";
+  EXPECT_EQ(Feed(m, State(kClear, 1, seq), t += 10ms).halt.reason, rc::HaltReason::kLinkError);
+  for (int i = 0; i < 10; ++i) EXPECT_NE(Feed(m, State(kClear, 1, ++seq), t += 10ms).kind, Kind::kClear);
+  EXPECT_TRUE(m.halted()) << "the second error within the window: nothing of this stream is used";
+  m.OnStreamEnded("CANCELLED", t += 1ms);
+  m.OnStreamOpened(t += 1ms);
+  t = ClearUp(m, t, 1, seq);
+  EXPECT_FALSE(m.halted());
+}

@@ -12,6 +12,7 @@
 #include <thread>
 #include <vector>
 
+#include "ruffini/channel/crc.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 
 namespace ruffini::testing {
@@ -94,6 +95,10 @@ class ScriptedAggregator final : public v1::Aggregator::Service {
           s.set_aggregator_start_t_ns(static_cast<std::int64_t>(run_id_));
           s.set_seq(++seq_);
         }
+        // The aggregator's part of the safety layer (docs/safety-channel.md): send time and CRC, last.
+        s.set_sender_steady_ns(
+            std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count());
+        ruffini::channel::Seal(s);
         if (!writer->Write(s)) break;
         ++sent_;
         last_sent_ns_ = std::chrono::steady_clock::now().time_since_epoch().count();

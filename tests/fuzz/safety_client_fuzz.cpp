@@ -16,6 +16,7 @@
 #include <cstdlib>
 #include <string>
 
+#include "ruffini/channel/crc.h"
 #include "safety_client.h"
 
 namespace rc = ruffini::controller;
@@ -104,13 +105,23 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
           last_evidence = t;
           clean = 0;
         }
+        // The safety layer: sent now (fresh), sometimes a few ms to seconds old, sealed; sometimes corrupted.
+        const std::uint8_t link = in.Next();
+        const auto sent = t - std::chrono::milliseconds((link & 0x0F) == 0x0F ? 25 * (link >> 4) : 0);
+        s.set_sender_steady_ns(std::chrono::duration_cast<std::chrono::nanoseconds>(sent.time_since_epoch()).count());
+        ruffini::channel::Seal(s);
+        if ((link & 0xF0) == 0xF0) s.set_safety_crc32(s.safety_crc32() ^ (1u << (link & 0x1F)));
         const bool ours = s.robot_name() == "cobot";
         const bool same = have_prev && s.aggregator_run_id() == prev_run &&
                           s.aggregator_start_t_ns() == prev_start && s.stop_epoch() == prev_epoch;
         const bool in_time = t - last_evidence <= timeout;
+        const std::uint64_t discarded_before = m.Stats(t).discarded;
         a = m.OnState(s, t);
+        const bool discarded = m.Stats(t).discarded > discarded_before;
         const bool clear = value == v1::SafetyState::STATE_CLEAR;
-        if (!ours) {
+        if (!ours || discarded) {
+          // Another robot's state, or one the safety layer discarded (corrupt, repeated, older, another run
+          // within the stream, late): it halts and is never clean.
           bad_state = true;
         } else {
           // A CLEAR of another run, or another epoch of the same run, is a restart or a missed stop: it halts.
