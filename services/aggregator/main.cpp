@@ -33,12 +33,16 @@ int main(int argc, char** argv) {
                       ->check(CLI::ExistingDirectory);
   app.add_flag("--insecure", insecure, "Plaintext gRPC, no identities: every caller may do everything (logged)")
       ->excludes(tls_opt);
-  double silence_ms = 0, joint_age_ms = 0;
+  double silence_ms = 0, joint_age_ms = 0, freshness_ms = 0;
   app.add_option("--patch-silence-ms", silence_ms,
                  "Override every patch's silence deadline (default: the scene's `safety:` values); for slow links "
                  "or loaded test machines, never shorter than 3 heartbeats")
       ->check(CLI::Range(30.0, 10000.0));
   app.add_option("--joint-max-age-ms", joint_age_ms, "Override the scene's joint-state max age")
+      ->check(CLI::Range(1.0, 10000.0));
+  app.add_option("--patch-freshness-ms", freshness_ms,
+                 "Override the scene's patch freshness budget (safety.link_layer.freshness_budget_ms, default 20 ms: "
+                 "a patch message older than this faults the patch; docs/safety-channel.md)")
       ->check(CLI::Range(1.0, 10000.0));
   CLI11_PARSE(app, argc, argv);
 
@@ -56,6 +60,10 @@ int main(int argc, char** argv) {
     if (silence_ms > 0) {
       for (auto& p : setup.safety.patches) p.silence_deadline_ns = static_cast<std::int64_t>(silence_ms * 1e6);
       spdlog::warn("--patch-silence-ms {}: the scene's patch silence deadlines are overridden", silence_ms);
+    }
+    if (freshness_ms > 0) {
+      setup.safety.link.freshness_budget_ns = static_cast<std::int64_t>(freshness_ms * 1e6);
+      spdlog::warn("--patch-freshness-ms {}: the scene's patch freshness budget is overridden", freshness_ms);
     }
     if (joint_age_ms > 0) {
       setup.safety.joint_state_max_age_ns = static_cast<std::int64_t>(joint_age_ms * 1e6);

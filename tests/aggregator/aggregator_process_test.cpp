@@ -157,10 +157,11 @@ std::optional<Seen> Last(const std::vector<Seen>& s) {
 TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOne) {
   const std::string base = (fs::current_path() / "aggregator_chain").string();
   int grpc_port = 0, sim_port = 0;
-  // Deadlines widened (200 ms silence, 200 ms joint-state age) so that a loaded 2-core CI machine does not
+  // Deadlines widened (200 ms silence, 200 ms joint-state age, 200 ms freshness) so that a loaded 2-core CI machine does not
   // fault a healthy patch; the 30 ms deadlines of the scene are tested on an injected clock (safety tests).
   rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
-                                    "127.0.0.1:0", "--patch-silence-ms", "200", "--joint-max-age-ms", "200"},
+                                    "127.0.0.1:0", "--patch-silence-ms", "200", "--joint-max-age-ms", "200",
+                                    "--patch-freshness-ms", "200"},
                                    base + "/aggregator", "grpc", grpc_port);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
   Controller controller(address);
@@ -185,7 +186,8 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
     int metrics = 0;
     decoders.push_back(StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", p, "--interrogator",
                                        "127.0.0.1:" + std::to_string(sim_port), "--aggregator", address, "--metrics",
-                                       "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100"},
+                                       "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100",
+                                       "--freshness-budget-ms", "200"},
                                       base + "/decoder_" + p, "metrics", metrics));
   }
   // A reset is refused while a patch is missing or not yet healthy; once every patch has been healthy for

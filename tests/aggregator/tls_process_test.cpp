@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "process.h"
+#include "seal.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "scrape.h"
 
@@ -206,6 +207,7 @@ TEST_F(TlsProcess, OperatorResetsOverMutualTlsAndEveryRefusalIsCountedAndChanges
     hello.set_patch_id("forearm_b");
     hello.set_seq(1);
     hello.mutable_hello()->set_decoder_instance("impostor");
+    ruffini::testing::SealAsDecoder(hello, 0, 1);  // a well-formed message: refused for who sends it, not how
     ASSERT_TRUE(stream->Write(hello));
     v1::AggregatorCommand cmd;
     ASSERT_TRUE(stream->Read(&cmd));
