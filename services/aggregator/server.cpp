@@ -32,27 +32,36 @@ namespace {
 
 constexpr const char* kVersion = "0.1.0";
 
-// Shared between a reactor and the loop: the reactor is deleted in OnDone, after which `alive` is false and
-// the loop's calls do nothing. One recursive mutex guards the reactor's state (a reaction may run inline).
+// Shared between a Connect/Joint reactor and the events it posts: the reactor is deleted in OnDone, after which
+// `alive` is false and the posted events do nothing (they hold the Guard, never only the reactor). One
+// recursive mutex guards the reactor's state (a reaction may run inline in a call the loop makes).
 struct Guard {
   std::recursive_mutex mu;
   bool alive = true;
 };
 
-// Latest-value slot writer for WatchSafety / WatchContacts.
+// Latest-value slot writer for WatchSafety / WatchContacts. Owned by shared_ptr, never by `delete this`: the
+// reactor holds itself (self_) until OnDone; the loop's subscriber set holds it from the posted insert to the
+// posted erase (which OnDone posts), so every call the loop makes is on a live object, and after OnDone
+// (done_, checked under mu_) the call does nothing. Every path ends in exactly one Finish: FinishWith (the
+// loop), a failed write, or a cancellation with no write in flight.
 template <typename Msg>
-class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
+class WatchReactor final : public grpc::ServerWriteReactor<Msg>, public std::enable_shared_from_this<WatchReactor<Msg>> {
  public:
-  WatchReactor(grpc::CallbackServerContext* ctx, std::function<void(WatchReactor*)> on_done)
-      : ctx_(ctx), guard_(std::make_shared<Guard>()), on_done_(std::move(on_done)) {}
+  using Ptr = std::shared_ptr<WatchReactor>;
+  // on_done runs once, from OnDone, with the last reference gRPC held; it posts the erase from the loop's set.
+  static Ptr Make(grpc::CallbackServerContext* ctx, std::function<void(Ptr)> on_done) {
+    Ptr r(new WatchReactor(ctx, std::move(on_done)));
+    r->self_ = r;
+    return r;
+  }
 
-  std::shared_ptr<Guard> guard() const { return guard_; }
-
-  // Loop thread (guard held by the caller through Offer's own lock).
+  // Loop thread.
   void Offer(const Msg& m, std::int64_t mono_ns) {
-    std::lock_guard lock(guard_->mu);
+    const Ptr keep = this->shared_from_this();  // a reaction run inline may end the call
+    std::lock_guard lock(mu_);
     // After Finish (ours, or after a failed write) and before OnDone, nothing may be started on the stream.
-    if (!guard_->alive || finishing_ || finished_) return;
+    if (done_ || finishing_ || finished_) return;
     if (writing_) {
       pending_ = m;  // replaces an older pending state: the newest wins (seq and stop_epoch tell what was skipped)
       return;
@@ -65,16 +74,18 @@ class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
   // A write stuck past the deadline: cancel the call; OnWriteDone(false) / OnDone follow. Returns true when
   // this subscriber was dropped now.
   bool CheckStuck(std::int64_t mono_ns, std::int64_t deadline_ns) {
-    std::lock_guard lock(guard_->mu);
-    if (!guard_->alive || !writing_ || dropped_ || mono_ns - write_started_ns_ <= deadline_ns) return false;
+    const Ptr keep = this->shared_from_this();
+    std::lock_guard lock(mu_);
+    if (done_ || !writing_ || dropped_ || mono_ns - write_started_ns_ <= deadline_ns) return false;
     dropped_ = true;
     ctx_->TryCancel();
     return true;
   }
   // Ends the stream after the write in flight (if any) with this status.
   void FinishWith(const grpc::Status& status) {
-    std::lock_guard lock(guard_->mu);
-    if (!guard_->alive || finishing_ || finished_) return;
+    const Ptr keep = this->shared_from_this();
+    std::lock_guard lock(mu_);
+    if (done_ || finishing_ || finished_) return;
     finishing_ = true;
     final_ = status;
     if (!writing_) {
@@ -91,14 +102,13 @@ class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
   }
 
   void OnWriteDone(bool ok) override {
-    std::lock_guard lock(guard_->mu);
+    const Ptr keep = this->shared_from_this();
+    std::lock_guard lock(mu_);
     writing_ = false;
     if (finished_) return;  // the last write went out with StartWriteAndFinish
     if (!ok) {
-      if (!finished_) {
-        finished_ = true;
-        this->Finish(grpc::Status(grpc::StatusCode::CANCELLED, "write failed"));
-      }
+      finished_ = true;
+      this->Finish(grpc::Status(grpc::StatusCode::CANCELLED, "write failed"));
       return;
     }
     if (pending_) {
@@ -111,27 +121,41 @@ class WatchReactor final : public grpc::ServerWriteReactor<Msg> {
       } else {
         this->StartWrite(&current_);
       }
-    } else if (finishing_ && !finished_) {
+    } else if (finishing_) {
       finished_ = true;
       this->Finish(final_);
     }
   }
+  // The client cancelled (or the transport died): with no write in flight nothing else would finish the call
+  // until the next Offer; with one, OnWriteDone(false) does.
+  void OnCancel() override {
+    const Ptr keep = this->shared_from_this();
+    std::lock_guard lock(mu_);
+    if (finished_ || writing_) return;
+    finished_ = true;
+    this->Finish(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled"));
+  }
   void OnDone() override {
+    Ptr self;
     {
-      std::lock_guard lock(guard_->mu);
-      guard_->alive = false;
+      std::lock_guard lock(mu_);
+      done_ = true;
+      self = std::move(self_);
     }
-    on_done_(this);
-    delete this;
+    on_done_(std::move(self));  // the object lives on in the loop's set until the posted erase
   }
 
  private:
-  grpc::CallbackServerContext* ctx_;
-  std::shared_ptr<Guard> guard_;
-  std::function<void(WatchReactor*)> on_done_;
+  WatchReactor(grpc::CallbackServerContext* ctx, std::function<void(Ptr)> on_done)
+      : ctx_(ctx), on_done_(std::move(on_done)) {}
+
+  grpc::CallbackServerContext* ctx_;  // valid until OnDone
+  std::function<void(Ptr)> on_done_;
+  Ptr self_;
+  std::recursive_mutex mu_;
   Msg current_;
   std::optional<Msg> pending_;
-  bool writing_ = false, finishing_ = false, finished_ = false, dropped_ = false;
+  bool writing_ = false, finishing_ = false, finished_ = false, dropped_ = false, done_ = false;
   grpc::Status final_;
   std::int64_t write_started_ns_ = 0;
 };
@@ -304,10 +328,10 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
   std::thread loop;
 
   // Loop-thread state.
-  std::set<SafetyReactor*> safety_subs;
-  std::set<ContactsReactor*> contact_subs;
-  std::map<SafetyReactor*, std::shared_ptr<Guard>> safety_guards;
-  std::map<ContactsReactor*, std::shared_ptr<Guard>> contact_guards;
+  // The subscribers: each set owns its reactors (a reference from the posted insert to the posted erase).
+  std::set<SafetyReactor::Ptr> safety_subs;
+  std::set<ContactsReactor::Ptr> contact_subs;
+  bool shut_down = false;  // Stop's last words were sent: a later subscriber is finished at once
   std::int64_t unix0 = 0, mono0 = 0;
   std::vector<bool> was_in_contact;
 
@@ -551,28 +575,25 @@ grpc::ServerWriteReactor<v1::SafetyState>* AggregatorServer::Impl::WatchSafety(g
   if (!Allowed(ctx, "WatchSafety", {service::Role::kController, service::Role::kOperator})) {
     return new DeniedReactor<grpc::ServerWriteReactor<v1::SafetyState>>(Denied("WatchSafety"));
   }
-  auto* r = new SafetyReactor(ctx, [this](SafetyReactor* gone) {
-    Post([this, gone] {
+  auto r = SafetyReactor::Make(ctx, [this](SafetyReactor::Ptr gone) {
+    Post([this, gone = std::move(gone)] {
       safety_subs.erase(gone);
-      safety_guards.erase(gone);
       stats.safety_subscribers = static_cast<int>(safety_subs.size());
     });
   });
   const std::string who = request->subscriber().empty() ? ctx->peer() : request->subscriber();
-  auto guard = r->guard();
-  Post([this, r, guard, who] {
-    if (stopping) return;
-    {
-      std::lock_guard lock(guard->mu);
-      if (!guard->alive) return;
+  Post([this, r, who] {
+    if (shut_down) {
+      r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
+      return;
     }
-    safety_subs.insert(r);
-    safety_guards[r] = guard;
+    safety_subs.insert(r);  // erased by the event its OnDone posts, which comes after this one
     stats.safety_subscribers = static_cast<int>(safety_subs.size());
-    spdlog::info("safety subscriber {} ({} now)", who, safety_subs.size());
+    // Debug level: a controller that reconnects in a loop would otherwise write a line per attempt.
+    spdlog::debug("safety subscriber {} ({} now)", who, safety_subs.size());
     r->Offer(core->SafetyState(), service::MonoNowNs());  // the state in force at once
   });
-  return r;
+  return r.get();
 }
 
 grpc::ServerWriteReactor<v1::ContactSet>* AggregatorServer::Impl::WatchContacts(grpc::CallbackServerContext* ctx,
@@ -580,25 +601,21 @@ grpc::ServerWriteReactor<v1::ContactSet>* AggregatorServer::Impl::WatchContacts(
   if (!Allowed(ctx, "WatchContacts", {service::Role::kController, service::Role::kOperator})) {
     return new DeniedReactor<grpc::ServerWriteReactor<v1::ContactSet>>(Denied("WatchContacts"));
   }
-  auto* r = new ContactsReactor(ctx, [this](ContactsReactor* gone) {
-    Post([this, gone] {
+  auto r = ContactsReactor::Make(ctx, [this](ContactsReactor::Ptr gone) {
+    Post([this, gone = std::move(gone)] {
       contact_subs.erase(gone);
-      contact_guards.erase(gone);
       stats.contact_subscribers = static_cast<int>(contact_subs.size());
     });
   });
-  auto guard = r->guard();
-  Post([this, r, guard] {
-    if (stopping) return;
-    {
-      std::lock_guard lock(guard->mu);
-      if (!guard->alive) return;
+  Post([this, r] {
+    if (shut_down) {
+      r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
+      return;
     }
     contact_subs.insert(r);
-    contact_guards[r] = guard;
     stats.contact_subscribers = static_cast<int>(contact_subs.size());
   });
-  return r;
+  return r.get();
 }
 
 grpc::ServerUnaryReactor* AggregatorServer::Impl::ResetStop(grpc::CallbackServerContext* ctx,
@@ -649,13 +666,13 @@ grpc::ServerUnaryReactor* AggregatorServer::Impl::GetStatus(grpc::CallbackServer
 void AggregatorServer::Impl::PublishSafety() {
   const v1::SafetyState s = core->SafetyState();
   const std::int64_t mono = service::MonoNowNs();
-  for (auto* r : safety_subs) r->Offer(s, mono);
+  for (const auto& r : safety_subs) r->Offer(s, mono);
 }
 
 void AggregatorServer::Impl::PublishContacts() {
   const v1::ContactSet c = core->Contacts(Now());
   const std::int64_t mono = service::MonoNowNs();
-  for (auto* r : contact_subs) r->Offer(c, mono);
+  for (const auto& r : contact_subs) r->Offer(c, mono);
 }
 
 void AggregatorServer::Impl::CopyStats() {
@@ -723,14 +740,14 @@ void AggregatorServer::Impl::Loop() {
       next_contacts = now + config.contacts_period_ns;
     }
     const std::int64_t mono = service::MonoNowNs();
-    for (auto* r : safety_subs) {
+    for (const auto& r : safety_subs) {
       if (r->CheckStuck(mono, config.write_deadline_ns)) {
         stats.subscriber_drops.fetch_add(1);
         spdlog::warn("safety subscriber dropped: a write was stuck for more than {} ms",
                      static_cast<double>(config.write_deadline_ns) / 1e6);
       }
     }
-    for (auto* r : contact_subs) {
+    for (const auto& r : contact_subs) {
       if (r->CheckStuck(mono, config.write_deadline_ns)) stats.subscriber_drops.fetch_add(1);
     }
     // Contact onsets per patch (for the contact-rate dashboards).
@@ -814,10 +831,11 @@ void AggregatorServer::Stop() {
   // Last words: FAULT (shutting down) to every subscriber, then every stream finished.
   std::promise<void> finished;
   s.Post([&s, &finished] {
+    s.shut_down = true;
     s.core->Shutdown(s.Now());
     s.PublishSafety();
-    for (auto* r : s.safety_subs) r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
-    for (auto* r : s.contact_subs) r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
+    for (const auto& r : s.safety_subs) r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
+    for (const auto& r : s.contact_subs) r->FinishWith(grpc::Status(grpc::StatusCode::UNAVAILABLE, "aggregator shutting down"));
     finished.set_value();
   });
   finished.get_future().wait_for(std::chrono::seconds(1));
