@@ -425,20 +425,29 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
   void OnWriteDone(bool ok) override {
     std::lock_guard lock(guard_->mu);
     out_.pop_front();
-    if (!ok) return;
-    if (!out_.empty()) {
+    if (ok && !out_.empty()) {
       StartWrite(&out_.front());
-    } else if (finish_pending_ && !finished_) {
+      return;
+    }
+    if (!ok) {
+      // The client is gone or the call was cancelled (a refusal whose decoder vanished): nothing more can be
+      // written. If the loop already asked to finish, this is the last chance to; otherwise the read side's
+      // failure (OnReadDone(false), which always follows) finishes the call.
+      write_failed_ = true;
+      out_.clear();
+    }
+    if (finish_pending_ && !finished_) {
       finished_ = true;
       Finish(final_);
     }
   }
   void OnDone() override {
     auto impl = impl_;
-    const int stream = stream_;
+    int stream = -1;
     {
-      std::lock_guard lock(guard_->mu);
+      std::lock_guard lock(guard_->mu);  // stream_ is written by the loop under the guard
       guard_->alive = false;
+      stream = stream_;
     }
     impl->Post([impl, stream] { impl->core->CloseStream(stream, impl->Now()); });
     delete this;
@@ -446,7 +455,7 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
 
   // Loop thread, guard held.
   void Send(const v1::AggregatorCommand& c) {
-    if (finish_pending_) return;
+    if (finish_pending_ || write_failed_) return;
     out_.push_back(c);
     if (out_.size() == 1) StartWrite(&out_.front());
   }
@@ -467,7 +476,8 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
   int stream_ = -1;
   v1::PatchMessage in_;
   std::deque<v1::AggregatorCommand> out_;
-  bool finish_pending_ = false, finished_ = false;
+  // Exactly one Finish: FinishOnce when nothing is queued, else the last OnWriteDone (ok or not).
+  bool finish_pending_ = false, finished_ = false, write_failed_ = false;
   grpc::Status final_;
 };
 
@@ -713,7 +723,13 @@ void AggregatorServer::Impl::Loop() {
   std::int64_t next_contacts = Now() + config.contacts_period_ns;
   std::int64_t next_stats = 0;
   std::deque<std::function<void()>> batch;
+  std::int64_t wedge_at = config.test_wedge_for_ns > 0 ? service::MonoNowNs() + config.test_wedge_after_ns : 0;
   for (;;) {
+    if (wedge_at != 0 && service::MonoNowNs() >= wedge_at) {
+      spdlog::warn("--test-wedge-loop: the loop sleeps {} ms", static_cast<double>(config.test_wedge_for_ns) / 1e6);
+      std::this_thread::sleep_for(std::chrono::nanoseconds(config.test_wedge_for_ns));
+      wedge_at = 0;
+    }
     {
       std::unique_lock lock(mu);
       cv.wait_for(lock, std::chrono::milliseconds(1), [&] { return !events.empty() || stopping; });
@@ -750,13 +766,12 @@ void AggregatorServer::Impl::Loop() {
     for (const auto& r : contact_subs) {
       if (r->CheckStuck(mono, config.write_deadline_ns)) stats.subscriber_drops.fetch_add(1);
     }
-    // Contact onsets per patch (for the contact-rate dashboards).
-    std::vector<bool> in_contact(was_in_contact.size(), false);
-    for (std::size_t i = 0; i < in_contact.size(); ++i) {
-      in_contact[i] = core->in_contact(i);
-      if (in_contact[i] && !was_in_contact[i]) stats.contacts[i].fetch_add(1);
+    // Contact onsets per patch (for the contact-rate dashboards); no allocation per iteration.
+    for (std::size_t i = 0; i < was_in_contact.size(); ++i) {
+      const bool in_contact = core->in_contact(i);
+      if (in_contact && !was_in_contact[i]) stats.contacts[i].fetch_add(1);
+      was_in_contact[i] = in_contact;
     }
-    was_in_contact = in_contact;
     if (now >= next_stats) {
       CopyStats();
       next_stats = now + 5'000'000;

@@ -25,6 +25,9 @@ struct ServerConfig {
   std::int64_t heartbeat_period_ns = 10'000'000;   // SafetyState heartbeat to every subscriber
   std::int64_t write_deadline_ns = 50'000'000;     // a subscriber's write stuck longer is finished with an error
   std::int64_t contacts_period_ns = 20'000'000;    // ContactSet heartbeat
+  // Tests only (the hidden --test-wedge-loop flag): the loop sleeps test_wedge_for_ns once,
+  // test_wedge_after_ns after Start(), as a wedged loop would (0: never).
+  std::int64_t test_wedge_after_ns = 0, test_wedge_for_ns = 0;
 };
 
 class AggregatorServer {

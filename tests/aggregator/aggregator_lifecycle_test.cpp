@@ -19,6 +19,7 @@
 
 #include "process.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
+#include "scrape.h"
 #include "service_process.h"
 
 namespace {
@@ -57,6 +58,20 @@ bool ReadsStates(v1::Aggregator::Stub& stub, int n, std::chrono::milliseconds ti
   ctx.TryCancel();
   reader->Finish();
   return got == n;
+}
+
+// True when GetStatus (answered by the loop) does not come back within `within`: the loop is wedged.
+bool LoopSilent(v1::Aggregator::Stub& stub, std::chrono::milliseconds within) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + within);
+  v1::AggregatorStatus st;
+  return stub.GetStatus(&ctx, v1::GetStatusRequest{}, &st).error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
+}
+
+// A sample of a Prometheus text scrape ("name value"); -1 when absent.
+double Sample(const std::string& text, const std::string& series) {
+  const auto at = text.find("\n" + series + " ");
+  return at == std::string::npos ? -1.0 : std::stod(text.substr(at + series.size() + 2));
 }
 
 double EnvSeconds(const char* name, double fallback) {
@@ -130,6 +145,52 @@ TEST(AggregatorLifecycle, WatchChurnFromEightThreadsNeitherCrashesNorStallsTheAg
   // And it stops cleanly (the sanitizers report at exit: a report is a non-zero exit).
   EXPECT_EQ(agg.Stop(), 0) << agg.stderr_text();
   EXPECT_FALSE(agg.killed());
+}
+
+// Finding 7 of the review: a refused hello whose client had already gone left its Connect call unfinished
+// (the refusal's write failed, and nothing finished the call after it), so SIGTERM hung in
+// grpc::Server::Shutdown until SIGKILL. Now every reactor path ends in exactly one Finish.
+// Made deterministic with the hidden --test-wedge-loop flag: while the loop sleeps, 50 clients each send a
+// hello for a patch the scene does not name and cancel 5 ms later (gRPC's threads have read the hello by
+// then); when the loop wakes it refuses hellos whose clients are gone, so every refusal's write fails.
+TEST(AggregatorLifecycle, SigtermExitsWithinTwoSecondsAfterFiftyAbandonedRefusedHellos) {
+  const std::string dir = (fs::current_path() / "lifecycle_abandoned").string();
+  int port = 0;
+  rt::Process agg = StartAggregator(dir, port, {"--test-wedge-loop", "300", "3000"});
+  ASSERT_GT(port, 0);
+  const std::string address = "127.0.0.1:" + std::to_string(port);
+  auto stub = v1::Aggregator::NewStub(OwnChannel(address));
+  ASSERT_TRUE(rt::WaitFor([&] { return LoopSilent(*stub, 100ms); }, 5s, 10ms)) << agg.stderr_text();
+  const auto wedged = std::chrono::steady_clock::now();
+  for (int i = 0; i < 50; ++i) {
+    grpc::ClientContext ctx;
+    auto stream = stub->Connect(&ctx);
+    v1::PatchMessage hello;
+    hello.set_patch_id("no_such_patch");
+    hello.set_seq(1);
+    hello.mutable_hello()->set_decoder_instance("abandoned-" + std::to_string(i));
+    stream->Write(hello);
+    std::this_thread::sleep_for(5ms);  // the hello's way into the server's read, not a wait for a condition
+    ctx.TryCancel();
+    stream->Finish();
+  }
+  const double sent_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wedged).count();
+  // The loop answers again, and the refusals were counted (the test is not vacuous).
+  ASSERT_TRUE(rt::WaitFor([&] { return !LoopSilent(*stub, 1s); }, 10s, 10ms));
+  const int metrics = rt::ReadPorts(dir + "/ports")["metrics"];
+  double refused = 0;
+  ASSERT_TRUE(rt::WaitFor([&] {
+    const double before = refused;
+    refused = Sample(rt::Scrape(metrics), "ruffini_aggregator_hellos_refused_total");
+    return refused >= 1 && refused == before;  // counted, and no longer changing
+  }, 5s, 100ms));
+  std::printf("[ metric ] 50 abandoned hellos sent in %.2f s of a 3 s wedge; refusals counted: %.0f\n", sent_s, refused);
+  const auto t0 = std::chrono::steady_clock::now();
+  agg.Signal(SIGTERM);
+  const int status = agg.WaitExit(2s);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("[ metric ] SIGTERM -> exit: %.3f s (status %d)\n", s, status);
+  EXPECT_EQ(status, 0) << "still running 2 s after SIGTERM:\n" << agg.stderr_text();
 }
 
 }  // namespace
