@@ -22,6 +22,7 @@
 #include <thread>
 
 #include "ruffini/error.h"
+#include "ruffini/service/keepalive.h"
 #include "ruffini/service/process_metrics.h"
 #include "ruffini/service/atomic_histogram.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
@@ -797,6 +798,9 @@ AggregatorServer::AggregatorServer(ServerConfig config, aggregate::Setup setup) 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
+  // Keepalive pings on every connection: a decoder or controller that vanished without closing its socket
+  // is dropped within ~2 s (its Connect stream then closes in the Core; docs/aggregator.md).
+  service::AddKeepalive(builder);
   builder.AddListeningPort(config.listen.str(), service::ServerCredentials(config.tls), &s.port);
   builder.RegisterService(&s);
   s.server = builder.BuildAndStart();
