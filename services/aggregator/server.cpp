@@ -801,17 +801,25 @@ AggregatorServer::AggregatorServer(ServerConfig config, aggregate::Setup setup) 
   // Keepalive pings on every connection: a decoder or controller that vanished without closing its socket
   // is dropped within ~2 s (its Connect stream then closes in the Core; docs/aggregator.md).
   service::AddKeepalive(builder);
+  // One port, one aggregator: without this gRPC sets SO_REUSEPORT, and a second copy (started by mistake, or a
+  // restart while the old one hangs) would listen on the same port and take half of the calls.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(config.listen.str(), service::ServerCredentials(config.tls), &s.port);
   builder.RegisterService(&s);
   s.server = builder.BuildAndStart();
-  if (!s.server || s.port == 0) throw InputError("--listen " + config.listen.str() + ": cannot listen there");
+  if (!s.server || s.port == 0) {
+    throw InputError("--listen " + config.listen.str() +
+                     ": cannot listen there (is another process, perhaps another aggregator, listening on it?)");
+  }
   if (config.health_listen) {
     // No service registered: the server carries only gRPC's default health service (enabled above).
     grpc::ServerBuilder health;
+    health.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
     health.AddListeningPort(config.health_listen->str(), grpc::InsecureServerCredentials(), &s.health_port);
     s.health_server = health.BuildAndStart();
     if (!s.health_server || s.health_port == 0) {
-      throw InputError("--health-listen " + config.health_listen->str() + ": cannot listen there");
+      throw InputError("--health-listen " + config.health_listen->str() +
+                       ": cannot listen there (is another process listening on it?)");
     }
   }
   try {

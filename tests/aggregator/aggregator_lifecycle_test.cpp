@@ -193,4 +193,26 @@ TEST(AggregatorLifecycle, SigtermExitsWithinTwoSecondsAfterFiftyAbandonedRefused
   EXPECT_EQ(status, 0) << "still running 2 s after SIGTERM:\n" << agg.stderr_text();
 }
 
+// One port, one aggregator: gRPC's default SO_REUSEPORT let a second aggregator listen on a taken port, and
+// calls were then split between two safety states (the review: 20 GetStatus calls answered by two runs). A
+// second start on a taken port must fail loudly: exit 1, the address named, the first one untouched.
+TEST(AggregatorLifecycle, ASecondAggregatorOnATakenPortFailsLoudly) {
+  const std::string dir = (fs::current_path() / "lifecycle_two").string();
+  int port = 0;
+  rt::Process first = StartAggregator(dir + "/first", port);
+  ASSERT_GT(port, 0);
+  const std::string address = "127.0.0.1:" + std::to_string(port);
+  fs::create_directories(dir + "/second");
+  rt::Process second({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", address, "--metrics",
+                      "127.0.0.1:0"},
+                     dir + "/second");
+  EXPECT_EQ(second.WaitExit(10s), 1) << "a second aggregator runs on " << address << ":\n" << second.stderr_text();
+  EXPECT_NE(second.stderr_text().find("--listen " + address + ": cannot listen there"), std::string::npos)
+      << second.stderr_text();
+  // The first one still answers, alone.
+  auto stub = v1::Aggregator::NewStub(OwnChannel(address));
+  EXPECT_TRUE(ReadsStates(*stub, 3, 5s));
+  EXPECT_TRUE(first.Running());
+}
+
 }  // namespace
