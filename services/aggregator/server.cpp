@@ -328,6 +328,21 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
   bool stopping = false;
   std::thread loop;
 
+  // The health service reflects the loop: the loop stamps loop_beat_ns (steady clock) every iteration; the
+  // health watcher reports NOT_SERVING while the stamp is older than kLoopStaleNs, SERVING again after.
+  static constexpr std::int64_t kLoopStaleNs = 200'000'000;
+  static constexpr auto kHealthWatchPeriod = std::chrono::milliseconds(20);
+  std::atomic<std::int64_t> loop_beat_ns{0};
+  std::thread health_watch;
+  std::mutex health_mu;
+  std::condition_variable health_cv;
+  bool health_stop = false;
+  void SetServing(bool serving) {
+    server->GetHealthCheckService()->SetServingStatus(serving);
+    if (health_server) health_server->GetHealthCheckService()->SetServingStatus(serving);
+  }
+  void HealthWatch();
+
   // Loop-thread state.
   // The subscribers: each set owns its reactors (a reference from the posted insert to the posted erase).
   std::set<SafetyReactor::Ptr> safety_subs;
@@ -719,6 +734,23 @@ void AggregatorServer::Impl::CopyStats() {
   }
 }
 
+void AggregatorServer::Impl::HealthWatch() {
+  bool serving = true;
+  std::unique_lock lock(health_mu);
+  while (!health_cv.wait_for(lock, kHealthWatchPeriod, [&] { return health_stop; })) {
+    const std::int64_t stale_ns = service::MonoNowNs() - loop_beat_ns.load(std::memory_order_relaxed);
+    const bool ok = stale_ns <= kLoopStaleNs;
+    if (ok == serving) continue;
+    serving = ok;
+    SetServing(ok);
+    if (!ok) {
+      spdlog::error("the loop has not run for {:.0f} ms: health NOT_SERVING", static_cast<double>(stale_ns) / 1e6);
+    } else {
+      spdlog::warn("the loop runs again: health SERVING");
+    }
+  }
+}
+
 void AggregatorServer::Impl::Loop() {
   std::int64_t next_heartbeat = Now() + config.heartbeat_period_ns;
   std::int64_t next_contacts = Now() + config.contacts_period_ns;
@@ -726,6 +758,7 @@ void AggregatorServer::Impl::Loop() {
   std::deque<std::function<void()>> batch;
   std::int64_t wedge_at = config.test_wedge_for_ns > 0 ? service::MonoNowNs() + config.test_wedge_after_ns : 0;
   for (;;) {
+    loop_beat_ns.store(service::MonoNowNs(), std::memory_order_relaxed);
     if (wedge_at != 0 && service::MonoNowNs() >= wedge_at) {
       spdlog::warn("--test-wedge-loop: the loop sleeps {} ms", static_cast<double>(config.test_wedge_for_ns) / 1e6);
       std::this_thread::sleep_for(std::chrono::nanoseconds(config.test_wedge_for_ns));
@@ -845,16 +878,22 @@ std::uint16_t AggregatorServer::metrics_port() const noexcept {
 
 void AggregatorServer::Start() {
   Impl& s = *impl_;
-  s.server->GetHealthCheckService()->SetServingStatus(true);
-  if (s.health_server) s.health_server->GetHealthCheckService()->SetServingStatus(true);
+  s.loop_beat_ns = service::MonoNowNs();
+  s.SetServing(true);
   s.loop = std::thread([&s] { s.Loop(); });
+  s.health_watch = std::thread([&s] { s.HealthWatch(); });
 }
 
 void AggregatorServer::Stop() {
   Impl& s = *impl_;
   if (!s.loop.joinable()) return;
-  s.server->GetHealthCheckService()->SetServingStatus(false);
-  if (s.health_server) s.health_server->GetHealthCheckService()->SetServingStatus(false);
+  {
+    std::lock_guard lock(s.health_mu);
+    s.health_stop = true;
+  }
+  s.health_cv.notify_one();
+  s.health_watch.join();
+  s.SetServing(false);
   // Last words: FAULT (shutting down) to every subscriber, then every stream finished.
   std::promise<void> finished;
   s.Post([&s, &finished] {

@@ -3,7 +3,9 @@
 // loop thread owns the Core and runs every event in arrival order, ticks every millisecond (patch silence,
 // joint staleness), publishes a SafetyState heartbeat every 10 ms, and hands states to subscribers through
 // per-subscriber latest-value slots (at most one write in flight each). A subscriber whose write is stuck
-// past its deadline is finished with an error, so its controller stops (silence is a stop).
+// past its deadline is finished with an error, so its controller stops (silence is a stop). The health
+// service (grpc.health.v1, on the main port and --health-listen) is NOT_SERVING while the loop has not run
+// for 200 ms, SERVING again once it runs.
 #include <cstdint>
 #include <memory>
 #include <optional>

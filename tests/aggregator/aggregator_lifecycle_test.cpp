@@ -215,4 +215,23 @@ TEST(AggregatorLifecycle, ASecondAggregatorOnATakenPortFailsLoudly) {
   EXPECT_TRUE(first.Running());
 }
 
+// The health service reflects the loop (finding 13 of the review: it was set SERVING once, so a wedged loop
+// stayed "live" for the kubelet). The hidden --test-wedge-loop flag makes the loop sleep 3 s, 1 s after
+// start: both health endpoints (the main port and --health-listen) must say NOT_SERVING (2) while it sleeps
+// (the watcher's threshold is 200 ms) and SERVING (1) again after.
+TEST(AggregatorLifecycle, HealthIsNotServingWhileTheLoopIsWedged) {
+  const std::string dir = (fs::current_path() / "lifecycle_wedge").string();
+  int port = 0;
+  rt::Process agg = StartAggregator(dir, port, {"--health-listen", "127.0.0.1:0", "--test-wedge-loop", "1000", "3000"});
+  ASSERT_GT(port, 0);
+  const std::string main_address = "127.0.0.1:" + std::to_string(port);
+  const std::string health_address = "127.0.0.1:" + std::to_string(rt::ReadPorts(dir + "/ports")["health"]);
+  auto both = [&](int status) {
+    return rt::HealthCheck(main_address, 500ms) == status && rt::HealthCheck(health_address, 500ms) == status;
+  };
+  EXPECT_TRUE(rt::WaitFor([&] { return both(2); }, 10s, 20ms)) << agg.stderr_text();
+  EXPECT_TRUE(rt::WaitFor([&] { return both(1); }, 10s, 20ms)) << agg.stderr_text();
+  EXPECT_NE(agg.stderr_text().find("health NOT_SERVING"), std::string::npos) << agg.stderr_text();
+}
+
 }  // namespace
