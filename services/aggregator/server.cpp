@@ -9,6 +9,7 @@
 #include <prometheus/exposer.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -46,13 +47,22 @@ struct Guard {
 // posted erase (which OnDone posts), so every call the loop makes is on a live object, and after OnDone
 // (done_, checked under mu_) the call does nothing. Every path ends in exactly one Finish: FinishWith (the
 // loop), a failed write, or a cancellation with no write in flight.
+// What a subscriber asked for (WatchSafetyRequest / WatchContactsRequest), fixed at subscription.
+struct WatchOptions {
+  std::int64_t period_ns = 0;      // the longest gap wanted, clamped (ClampPeriod)
+  std::vector<std::string> links;  // WatchContacts: only these URDF links (empty: all)
+  float min_force_n = 0;           // WatchContacts: only contacts at or above this force
+  [[nodiscard]] bool filters() const { return !links.empty() || min_force_n > 0; }
+};
+
 template <typename Msg>
 class WatchReactor final : public grpc::ServerWriteReactor<Msg>, public std::enable_shared_from_this<WatchReactor<Msg>> {
  public:
   using Ptr = std::shared_ptr<WatchReactor>;
+  [[nodiscard]] const WatchOptions& options() const noexcept { return options_; }
   // on_done runs once, from OnDone, with the last reference gRPC held; it posts the erase from the loop's set.
-  static Ptr Make(grpc::CallbackServerContext* ctx, std::function<void(Ptr)> on_done) {
-    Ptr r(new WatchReactor(ctx, std::move(on_done)));
+  static Ptr Make(grpc::CallbackServerContext* ctx, WatchOptions options, std::function<void(Ptr)> on_done) {
+    Ptr r(new WatchReactor(ctx, std::move(options), std::move(on_done)));
     r->self_ = r;
     return r;
   }
@@ -147,10 +157,11 @@ class WatchReactor final : public grpc::ServerWriteReactor<Msg>, public std::ena
   }
 
  private:
-  WatchReactor(grpc::CallbackServerContext* ctx, std::function<void(Ptr)> on_done)
-      : ctx_(ctx), on_done_(std::move(on_done)) {}
+  WatchReactor(grpc::CallbackServerContext* ctx, WatchOptions options, std::function<void(Ptr)> on_done)
+      : ctx_(ctx), options_(std::move(options)), on_done_(std::move(on_done)) {}
 
   grpc::CallbackServerContext* ctx_;  // valid until OnDone
+  const WatchOptions options_;
   std::function<void(Ptr)> on_done_;
   Ptr self_;
   std::recursive_mutex mu_;
@@ -348,6 +359,24 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
   std::set<SafetyReactor::Ptr> safety_subs;
   std::set<ContactsReactor::Ptr> contact_subs;
   bool shut_down = false;  // Stop's last words were sent: a later subscriber is finished at once
+  // The publication periods in force: the shortest any subscriber asked for, never longer than the config's
+  // (10 ms) nor shorter than kShortestPeriodNs. Every subscriber receives every publication (seq is shared).
+  static constexpr std::int64_t kShortestPeriodNs = 2'000'000;
+  std::int64_t safety_period_ns = 0, contacts_period_ns = 0;
+  bool periods_changed = false;
+  // A request's heartbeat_period_ns (0: the longest) clamped to [kShortestPeriodNs, longest].
+  static std::int64_t ClampPeriod(std::int64_t requested, std::int64_t longest) {
+    if (requested <= 0 || requested > longest) return longest;
+    return std::max(requested, std::min(kShortestPeriodNs, longest));
+  }
+  void RecomputePeriods() {
+    std::int64_t safety = config.heartbeat_period_ns, contacts = config.contacts_period_ns;
+    for (const auto& r : safety_subs) safety = std::min(safety, r->options().period_ns);
+    for (const auto& r : contact_subs) contacts = std::min(contacts, r->options().period_ns);
+    periods_changed = periods_changed || safety != safety_period_ns || contacts != contacts_period_ns;
+    safety_period_ns = safety;
+    contacts_period_ns = contacts;
+  }
   std::int64_t unix0 = 0, mono0 = 0;
   std::vector<bool> was_in_contact;
 
@@ -601,10 +630,18 @@ grpc::ServerWriteReactor<v1::SafetyState>* AggregatorServer::Impl::WatchSafety(g
   if (!Allowed(ctx, "WatchSafety", {service::Role::kController, service::Role::kOperator})) {
     return new DeniedReactor<grpc::ServerWriteReactor<v1::SafetyState>>(Denied("WatchSafety"));
   }
-  auto r = SafetyReactor::Make(ctx, [this](SafetyReactor::Ptr gone) {
+  if (request->heartbeat_period_ns() < 0) {
+    return new DeniedReactor<grpc::ServerWriteReactor<v1::SafetyState>>(grpc::Status(
+        grpc::StatusCode::INVALID_ARGUMENT,
+        "heartbeat_period_ns (" + std::to_string(request->heartbeat_period_ns()) + ") must be 0 or positive"));
+  }
+  WatchOptions options;
+  options.period_ns = ClampPeriod(request->heartbeat_period_ns(), config.heartbeat_period_ns);
+  auto r = SafetyReactor::Make(ctx, std::move(options), [this](SafetyReactor::Ptr gone) {
     Post([this, gone = std::move(gone)] {
       safety_subs.erase(gone);
       stats.safety_subscribers = static_cast<int>(safety_subs.size());
+      RecomputePeriods();
     });
   });
   const std::string who = request->subscriber().empty() ? ctx->peer() : request->subscriber();
@@ -615,6 +652,7 @@ grpc::ServerWriteReactor<v1::SafetyState>* AggregatorServer::Impl::WatchSafety(g
     }
     safety_subs.insert(r);  // erased by the event its OnDone posts, which comes after this one
     stats.safety_subscribers = static_cast<int>(safety_subs.size());
+    RecomputePeriods();
     // Debug level: a controller that reconnects in a loop would otherwise write a line per attempt.
     spdlog::debug("safety subscriber {} ({} now)", who, safety_subs.size());
     r->Offer(core->SafetyState(), service::MonoNowNs());  // the state in force at once
@@ -623,14 +661,25 @@ grpc::ServerWriteReactor<v1::SafetyState>* AggregatorServer::Impl::WatchSafety(g
 }
 
 grpc::ServerWriteReactor<v1::ContactSet>* AggregatorServer::Impl::WatchContacts(grpc::CallbackServerContext* ctx,
-                                                                                const v1::WatchContactsRequest* /*request*/) {
+                                                                                const v1::WatchContactsRequest* request) {
   if (!Allowed(ctx, "WatchContacts", {service::Role::kController, service::Role::kOperator})) {
     return new DeniedReactor<grpc::ServerWriteReactor<v1::ContactSet>>(Denied("WatchContacts"));
   }
-  auto r = ContactsReactor::Make(ctx, [this](ContactsReactor::Ptr gone) {
+  if (request->heartbeat_period_ns() < 0 || !(request->min_force_n() >= 0.0F)) {
+    return new DeniedReactor<grpc::ServerWriteReactor<v1::ContactSet>>(grpc::Status(
+        grpc::StatusCode::INVALID_ARGUMENT, "heartbeat_period_ns (" + std::to_string(request->heartbeat_period_ns()) +
+                                                ") and min_force_n (" + std::to_string(request->min_force_n()) +
+                                                " N) must be 0 or positive"));
+  }
+  WatchOptions options;
+  options.period_ns = ClampPeriod(request->heartbeat_period_ns(), config.contacts_period_ns);
+  options.links.assign(request->links().begin(), request->links().end());
+  options.min_force_n = request->min_force_n();
+  auto r = ContactsReactor::Make(ctx, std::move(options), [this](ContactsReactor::Ptr gone) {
     Post([this, gone = std::move(gone)] {
       contact_subs.erase(gone);
       stats.contact_subscribers = static_cast<int>(contact_subs.size());
+      RecomputePeriods();
     });
   });
   Post([this, r] {
@@ -640,6 +689,7 @@ grpc::ServerWriteReactor<v1::ContactSet>* AggregatorServer::Impl::WatchContacts(
     }
     contact_subs.insert(r);
     stats.contact_subscribers = static_cast<int>(contact_subs.size());
+    RecomputePeriods();
   });
   return r.get();
 }
@@ -695,10 +745,41 @@ void AggregatorServer::Impl::PublishSafety() {
   for (const auto& r : safety_subs) r->Offer(s, mono);
 }
 
+namespace {
+
+// ContactSet.t_ns as the contract has it: the newest contributing frame's interrogator time, 0 when empty.
+void SetNewestFrameTime(v1::ContactSet& set) {
+  std::int64_t t = 0;
+  for (const auto& c : set.contacts()) t = std::max(t, c.t_ns());
+  set.set_t_ns(t);
+}
+
+bool Wanted(const v1::BodyContact& c, const WatchOptions& o) {
+  if (c.force_n() < o.min_force_n) return false;  // a NaN force (never published) would be kept
+  return o.links.empty() || std::find(o.links.begin(), o.links.end(), c.link()) != o.links.end();
+}
+
+}  // namespace
+
 void AggregatorServer::Impl::PublishContacts() {
-  const v1::ContactSet c = core->Contacts(Now());
+  v1::ContactSet c = core->Contacts(Now());
+  SetNewestFrameTime(c);
   const std::int64_t mono = service::MonoNowNs();
-  for (const auto& r : contact_subs) r->Offer(c, mono);
+  v1::ContactSet filtered;
+  for (const auto& r : contact_subs) {
+    const WatchOptions& o = r->options();
+    if (!o.filters()) {
+      r->Offer(c, mono);
+      continue;
+    }
+    filtered = c;
+    filtered.clear_contacts();
+    for (const auto& contact : c.contacts()) {
+      if (Wanted(contact, o)) *filtered.add_contacts() = contact;
+    }
+    SetNewestFrameTime(filtered);
+    r->Offer(filtered, mono);
+  }
 }
 
 void AggregatorServer::Impl::CopyStats() {
@@ -752,8 +833,10 @@ void AggregatorServer::Impl::HealthWatch() {
 }
 
 void AggregatorServer::Impl::Loop() {
-  std::int64_t next_heartbeat = Now() + config.heartbeat_period_ns;
-  std::int64_t next_contacts = Now() + config.contacts_period_ns;
+  safety_period_ns = config.heartbeat_period_ns;
+  contacts_period_ns = config.contacts_period_ns;
+  std::int64_t next_heartbeat = Now() + safety_period_ns;
+  std::int64_t next_contacts = Now() + contacts_period_ns;
   std::int64_t next_stats = 0;
   std::deque<std::function<void()>> batch;
   std::int64_t wedge_at = config.test_wedge_for_ns > 0 ? service::MonoNowNs() + config.test_wedge_after_ns : 0;
@@ -776,18 +859,24 @@ void AggregatorServer::Impl::Loop() {
     batch.clear();
     contacts_changed = core->counters().contacts != contacts_before;
     const std::int64_t now = Now();
+    if (periods_changed) {  // a subscriber asking for a shorter period gets it from now on
+      next_heartbeat = std::min(next_heartbeat, now + safety_period_ns);
+      next_contacts = std::min(next_contacts, now + contacts_period_ns);
+      periods_changed = false;
+    }
     core->Tick(now);
     if (now >= next_heartbeat) {
       core->Publish(now);
-      next_heartbeat += config.heartbeat_period_ns;
-      if (next_heartbeat <= now) next_heartbeat = now + config.heartbeat_period_ns;
+      next_heartbeat += safety_period_ns;
+      if (next_heartbeat <= now) next_heartbeat = now + safety_period_ns;
     }
     const std::int64_t latency = core->TakeStopLatencyNs();
     if (latency >= 0) stats.frame_to_stop.ObserveNs(latency);
     if (core->TakeChanged()) PublishSafety();
     if (contacts_changed || now >= next_contacts) {
       PublishContacts();
-      next_contacts = now + config.contacts_period_ns;
+      if (now >= next_contacts) next_contacts += contacts_period_ns;  // phase-locked, like the safety heartbeat
+      if (next_contacts <= now) next_contacts = now + contacts_period_ns;
     }
     const std::int64_t mono = service::MonoNowNs();
     for (const auto& r : safety_subs) {
