@@ -124,6 +124,8 @@ class Controller {
     return seen_;
   }
   bool ended() const { return ended_; }
+  // From now on the next end of the stream is final (ended() turns true).
+  void StopResubscribing() { resubscribe_ = false; }
   grpc::Status end_status() {
     std::lock_guard lock(mu_);
     return end_;
@@ -155,9 +157,10 @@ class Controller {
         return;
       }
       ++resubscribed_;
+      std::this_thread::sleep_for(10ms);  // a reconnecting controller's pace, not a wait
     }
   }
-  const bool resubscribe_;
+  std::atomic<bool> resubscribe_;
   bool closing_ = false;
   int resubscribed_ = 0;
   grpc::ClientContext* watch_ctx_ = nullptr;
@@ -186,7 +189,7 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
                                     "127.0.0.1:0", "--patch-silence-ms", "200", "--joint-max-age-ms", "200"},
                                    base + "/aggregator", "grpc", grpc_port);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
-  Controller controller(address);
+  Controller controller(address, /*resubscribe=*/true);
   // Before any decoder: FAULT, epoch 1, cause start-up; heartbeats every 10 ms.
   ASSERT_TRUE(rt::WaitFor([&] { return controller.Snapshot().size() >= 10; }, 5s)) << agg.stderr_text();
   {
@@ -280,7 +283,7 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
 
   // A decoder dies (kill -9): every WatchSafety subscriber sees FAULT within 50 ms. A second subscriber joins
   // first.
-  Controller second(address);
+  Controller second(address, /*resubscribe=*/true);
   ASSERT_TRUE(rt::WaitFor([&] { return second.Snapshot().size() >= 3; }, 5s));
   const std::int64_t killed_at = UnixNs();
   decoders[3].Signal(SIGKILL);
@@ -316,6 +319,7 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   EXPECT_EQ(refused_now.state().state(), v1::SafetyState::STATE_FAULT);
 
   // The aggregator shuts down: FAULT (shutting down), the stream ends, exit 0.
+  controller.StopResubscribing();
   EXPECT_EQ(agg.Stop(), 0);
   EXPECT_FALSE(agg.killed());
   EXPECT_TRUE(rt::WaitFor([&] { return controller.ended(); }, 3s));
