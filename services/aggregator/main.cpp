@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "ruffini/error.h"
 #include "scene_setup.h"
@@ -44,6 +45,11 @@ int main(int argc, char** argv) {
                  "Override the scene's patch freshness budget (safety.link_layer.freshness_budget_ms, default 20 ms: "
                  "a patch message older than this faults the patch; docs/safety-channel.md)")
       ->check(CLI::Range(1.0, 10000.0));
+  std::vector<double> wedge_ms;  // tests only: AT_MS FOR_MS
+  app.add_option("--test-wedge-loop", wedge_ms, "Tests only: the loop sleeps FOR_MS once, AT_MS after start")
+      ->expected(2)
+      ->check(CLI::Range(0.0, 60000.0))
+      ->group("");  // hidden
   CLI11_PARSE(app, argc, argv);
 
   ruffini::service::BlockStopSignals();
@@ -55,6 +61,12 @@ int main(int argc, char** argv) {
     config.metrics = ruffini::service::ParseHostPort(metrics, "--metrics", /*allow_zero=*/true);
     if (!health_listen.empty()) {
       config.health_listen = ruffini::service::ParseHostPort(health_listen, "--health-listen", /*allow_zero=*/true);
+    }
+    if (wedge_ms.size() == 2) {
+      config.test_wedge_after_ns = static_cast<std::int64_t>(wedge_ms[0] * 1e6);
+      config.test_wedge_for_ns = static_cast<std::int64_t>(wedge_ms[1] * 1e6);
+      spdlog::warn("--test-wedge-loop: the loop will sleep {} ms, {} ms after start (a test's fault injection)",
+                   wedge_ms[1], wedge_ms[0]);
     }
     ruffini::aggregate::Setup setup = ruffini::aggregator::SetupFromScene(scene_path);
     if (silence_ms > 0) {

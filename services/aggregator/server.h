@@ -3,7 +3,9 @@
 // loop thread owns the Core and runs every event in arrival order, ticks every millisecond (patch silence,
 // joint staleness), publishes a SafetyState heartbeat every 10 ms, and hands states to subscribers through
 // per-subscriber latest-value slots (at most one write in flight each). A subscriber whose write is stuck
-// past its deadline is finished with an error, so its controller stops (silence is a stop).
+// past its deadline is finished with an error, so its controller stops (silence is a stop). The health
+// service (grpc.health.v1, on the main port and --health-listen) is NOT_SERVING while the loop has not run
+// for 200 ms, SERVING again once it runs.
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -22,9 +24,14 @@ struct ServerConfig {
   // A plaintext listener serving only grpc.health.v1 (the kubelet's gRPC probe cannot present a client
   // certificate); none when unset.
   std::optional<service::HostPort> health_listen;
-  std::int64_t heartbeat_period_ns = 10'000'000;   // SafetyState heartbeat to every subscriber
+  // SafetyState heartbeat to every subscriber: this period, or the shortest a subscriber asked for
+  // (WatchSafetyRequest.heartbeat_period_ns, at least 2 ms).
+  std::int64_t heartbeat_period_ns = 10'000'000;
   std::int64_t write_deadline_ns = 50'000'000;     // a subscriber's write stuck longer is finished with an error
-  std::int64_t contacts_period_ns = 20'000'000;    // ContactSet heartbeat
+  std::int64_t contacts_period_ns = 10'000'000;    // ContactSet heartbeat (the same rule as heartbeat_period_ns)
+  // Tests only (the hidden --test-wedge-loop flag): the loop sleeps test_wedge_for_ns once,
+  // test_wedge_after_ns after Start(), as a wedged loop would (0: never).
+  std::int64_t test_wedge_after_ns = 0, test_wedge_for_ns = 0;
 };
 
 class AggregatorServer {

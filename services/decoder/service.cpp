@@ -17,6 +17,7 @@
 
 #include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
+#include "ruffini/service/keepalive.h"
 #include "ruffini/service/process_metrics.h"
 #include "ruffini/service/tls.h"
 #include "ruffini/ingest/hyperion.h"
@@ -648,6 +649,9 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
+  // A dead transport (the aggregator's host gone, a frozen link) is closed within ~2 s, so the stream ends and
+  // the decoder reconnects (docs/aggregator.md, "Keepalive").
+  service::AddKeepalive(args);
   s.channel_to_aggregator =
       grpc::CreateCustomChannel(s.config.aggregator.str(), service::ChannelCredentials(s.tls), args);
 }

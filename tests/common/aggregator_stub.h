@@ -30,6 +30,11 @@ class AggregatorStub final : public v1::Aggregator::Service {
   // port 0: pick a free one (port() says which); else that port (an aggregator coming back where it was).
   explicit AggregatorStub(int port = 0) {
     grpc::ServerBuilder builder;
+    // Accept the decoder's keepalive pings (one a second) as the real aggregator does
+    // (ruffini/service/keepalive.h); gRPC's default would answer them with GOAWAY too_many_pings after a few
+    // seconds, and the decoder would reconnect.
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+    builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 500);
     builder.AddListeningPort("127.0.0.1:" + std::to_string(port), grpc::InsecureServerCredentials(), &port_);
     builder.RegisterService(this);
     server_ = builder.BuildAndStart();
