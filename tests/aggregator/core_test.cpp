@@ -549,6 +549,25 @@ TEST_F(CoreTest, AWildJointStampIsRefusedAndCannotLockTheAggregator) {
   EXPECT_EQ(core.Status(tc + 6 * kMs).joint_state_age_ns(), 0);
 }
 
+// A healthy heartbeat out of contact ends the Core's contact as it ends the policy's: a doubt shown in the
+// contact set (off the patch) is gone after it (before, the Core kept it until a released frame).
+TEST_F(CoreTest, AHealthyHeartbeatOutOfContactEndsTheContactInTheSet) {
+  const auto streams = ClearAll();
+  v1::PatchMessage off = ContactMsg(0.5f, tc);
+  off.mutable_contact()->set_located(true);
+  off.mutable_contact()->set_y_mm(5000);
+  Send(streams[0], 0, off, tc);
+  ASSERT_EQ(core.Contacts(tc).contacts_size(), 1);
+  v1::PatchMessage hb;
+  hb.mutable_heartbeat()->set_healthy(true);
+  hb.mutable_heartbeat()->set_in_contact(true);
+  Send(streams[0], 0, hb, tc + kMs);
+  EXPECT_EQ(core.Contacts(tc + kMs).contacts_size(), 1);  // still touched
+  hb.mutable_heartbeat()->set_in_contact(false);
+  Send(streams[0], 0, hb, tc + 2 * kMs);
+  EXPECT_EQ(core.Contacts(tc + 2 * kMs).contacts_size(), 0);
+}
+
 TEST_F(CoreTest, NoJointStateYetIsAgeMinusOne) { EXPECT_EQ(core.Status(kT0).joint_state_age_ns(), -1); }
 
 // Finding 4 (core half): every SafetyState, AggregatorStatus and HelloAccepted carries the run id and the robot
