@@ -5,6 +5,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <random>
 
 #include "ruffini/aggregate/core.h"
 #include "ruffini/error.h"
@@ -13,6 +14,10 @@
 #include "ruffini/scene_file.h"
 #include "ruffini/twin/scene.h"
 #include "sealed.h"
+
+// The program runner of the Core's fuzz target (tests/fuzz): bytes -> streams, joint states, resets, ticks,
+// with the safety invariants checked after every step.
+#include "../fuzz/core_program.h"
 
 namespace {
 
@@ -550,6 +555,25 @@ TEST_F(CoreTest, AWildJointStampIsRefusedAndCannotLockTheAggregator) {
   EXPECT_EQ(core.Status(tc + 6 * kMs).joint_state_age_ns(), 0);
 }
 
+// A healthy heartbeat out of contact ends the Core's contact as it ends the policy's: a doubt shown in the
+// contact set (off the patch) is gone after it (before, the Core kept it until a released frame).
+TEST_F(CoreTest, AHealthyHeartbeatOutOfContactEndsTheContactInTheSet) {
+  const auto streams = ClearAll();
+  v1::PatchMessage off = ContactMsg(0.5f, tc);
+  off.mutable_contact()->set_located(true);
+  off.mutable_contact()->set_y_mm(5000);
+  Send(streams[0], 0, off, tc);
+  ASSERT_EQ(core.Contacts(tc).contacts_size(), 1);
+  v1::PatchMessage hb;
+  hb.mutable_heartbeat()->set_healthy(true);
+  hb.mutable_heartbeat()->set_in_contact(true);
+  Send(streams[0], 0, hb, tc + kMs);
+  EXPECT_EQ(core.Contacts(tc + kMs).contacts_size(), 1);  // still touched
+  hb.mutable_heartbeat()->set_in_contact(false);
+  Send(streams[0], 0, hb, tc + 2 * kMs);
+  EXPECT_EQ(core.Contacts(tc + 2 * kMs).contacts_size(), 0);
+}
+
 TEST_F(CoreTest, NoJointStateYetIsAgeMinusOne) { EXPECT_EQ(core.Status(kT0).joint_state_age_ns(), -1); }
 
 // Finding 4 (core half): every SafetyState, AggregatorStatus and HelloAccepted carries the run id and the robot
@@ -655,6 +679,67 @@ TEST_F(CoreTest, AContactHoveringAtTheThresholdOpensOneEpoch) {
   }
   EXPECT_EQ(core.SafetyState().stop_epoch(), epoch + 1);
   EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+}
+
+// tests/safety/property_test.cpp's idea for the Core: seeded random programs (the fuzz target's byte language,
+// core_program.h), each starting from the cobot scene cleared (four hellos, 300 ms of healthy heartbeats and
+// joint states, the start-up reset), then random steps. Any invariant broken aborts the test (no NaN
+// published, epoch and seq never decrease, no CLEAR without an accepted reset naming this run and the epoch
+// in force, identity on every state). The tallies show the programs reach STOP, FAULT, resets and clears.
+TEST(CoreProperty, RandomProgramsKeepTheInvariants) {
+  std::vector<std::uint8_t> clear;
+  auto add = [&clear](std::initializer_list<int> xs) {
+    for (int x : xs) clear.push_back(static_cast<std::uint8_t>(x));
+  };
+  for (int i = 0; i < 4; ++i) add({0, 0, 1});
+  for (int i = 0; i < 4; ++i) add({1, 0, i, i, 0});
+  for (int k = 0; k < 30; ++k) {
+    add({10, 50, 0});
+    for (int i = 0; i < 4; ++i) add({3, 0, i, 0});
+    add({12, 0, 0});
+  }
+  add({11, 0, 0});
+  // The pieces programs are made of: mostly 10 ms of health (so clears happen), contacts light and hard,
+  // resets right and of another run, snapshots; and random bytes.
+  const std::vector<std::vector<int>> pieces = {
+      {10, 50, 0, 3, 0, 0, 0, 3, 0, 1, 0, 3, 0, 2, 0, 3, 0, 3, 0, 12, 0, 1},  // 10 ms of health
+      {5, 1, 0, 1, 4, 0, 4, 50, 100, 100},                                    // a light contact on forearm_a
+      {5, 1, 0, 2, 4, 0, 4, 0, 100, 100},                                     // its released frame
+      {5, 1, 1, 0, 4, 0, 4, 200, 100, 100},                                   // a hard contact on forearm_b
+      {5, 1, 1, 2, 4, 0, 4, 0, 100, 100},                                     // its released frame
+      {11, 0, 0},                                                             // a reset of the epoch in force
+      {11, 0, 4},                                                             // a reset naming another run
+      {13, 0},                                                                // contacts and status
+  };
+  core_program::Tally total;
+  constexpr int kPrograms = 300;
+  for (int seed = 1; seed <= kPrograms; ++seed) {
+    std::mt19937 rng(static_cast<std::uint32_t>(seed));
+    std::vector<std::uint8_t> bytes = clear;
+    for (int k = 0; k < 400; ++k) {
+      const auto r = static_cast<unsigned>(rng() % 100);
+      if (r < 5) {
+        for (int j = 0; j < 8; ++j) bytes.push_back(static_cast<std::uint8_t>(rng()));
+      } else {
+        const auto& piece = pieces[r < 55 ? 0 : 1 + r % (pieces.size() - 1)];
+        for (int x : piece) bytes.push_back(static_cast<std::uint8_t>(x));
+      }
+    }
+    const core_program::Tally t = core_program::Run(bytes.data(), bytes.size());
+    total.steps += t.steps;
+    total.accepted_resets += t.accepted_resets;
+    total.stops += t.stops;
+    total.faults += t.faults;
+    total.clears += t.clears;
+  }
+  std::printf("programs %d, steps %ld, stops %ld, faults %ld, accepted resets %ld, clears %ld\n", kPrograms,
+              total.steps, total.stops, total.faults, total.accepted_resets, total.clears);
+  EXPECT_EQ(total.clears, total.accepted_resets);
+  // Seeds 1..300 gave 542712 steps, 255 STOPs, 321 FAULTs, 453 clears (300 of them the start-ups).
+  EXPECT_GT(total.clears, kPrograms + 100);  // beyond the start-up reset of each program
+  EXPECT_GT(total.stops, kPrograms / 2);
+  EXPECT_GT(total.faults, kPrograms / 2);
+  EXPECT_GT(total.steps, 100L * kPrograms);
 }
 
 TEST(CoreSetup, InconsistentSetupsAreRefused) {
