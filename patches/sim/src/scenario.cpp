@@ -37,7 +37,7 @@ Scenario LoadScenario(const std::string& path, const twin::Scene& scene) {
     press.patch = static_cast<std::size_t>(it - scene.patches.begin());
     press.y_mm = p.Number("y_mm", -1e4, 1e4);
     press.r_deg = p.Number("r_deg", -360.0, 360.0);
-    press.force_n = p.Number("force_n", 0.0, 100.0);
+    press.force_n = p.Number("force_n", 0.0, 300.0);
     press.ramp_s = p.NumberOr("ramp_s", 0.0, 0.0, 1e4);
     press.hold_s = p.NumberOr("hold_s", 0.0, 0.0, 1e4);
     press.release_s = p.NumberOr("release_s", 0.0, 0.0, 1e4);

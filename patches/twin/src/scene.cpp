@@ -108,6 +108,13 @@ TwinEffects ReadEffects(YamlReader& e) {
       out.faults.push_back(fe);
     }
   }
+  if (auto h = e.MapOr("hard_press")) {
+    out.hard_press.microbend_compression =
+        h->NumberOr("microbend_compression", out.hard_press.microbend_compression, 0.31, 0.98);
+    out.hard_press.pinch_margin_mm = h->NumberOr("pinch_margin_mm", out.hard_press.pinch_margin_mm, 0.0, 10.0);
+    h->Finish();
+    out.hard_press_named = true;
+  }
   if (auto s = e.MapOr("skin_sample")) {
     SkinSampleEffect ss;
     ss.seed = static_cast<std::uint64_t>(s->IntegerOr("seed", static_cast<long>(ss.seed), 0, 1L << 40));

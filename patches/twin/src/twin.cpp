@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <tuple>
@@ -149,7 +150,34 @@ SkinTwin::SkinTwin(const patch::PatchSpec& spec, const TwinEffects& effects, std
   tables_ = CachedTables(layer, spec.gratings[0].length_mm);
   for (double r : sphere_radii) {
     law_radii_mm_.push_back(r);
-    laws_.emplace_back(thickness_mm_, spec.layer.material.youngs_modulus_kpa, spec.layer.material.poisson_ratio, r);
+    const auto& m = spec.layer.material;
+    laws_.emplace_back(thickness_mm_, m.youngs_modulus_kpa, m.poisson_ratio, r,
+                       Yeoh{m.yeoh_c1_kpa * 1e3, m.yeoh_c2_pa, m.yeoh_c3_pa});
+  }
+  // The fibre path at the fibre's depth (unrolled), its cumulative length, and where each grating sits on it
+  // (the light enters at the path's first point): a pinch at path length s darkens the gratings beyond s.
+  for (const auto& p : spec.fibre.path) {
+    path_y_mm_.push_back(p.y_mm);
+    path_arc_mm_.push_back(depth_radius_mm_ * p.r_deg * patch::kDegToRad);
+  }
+  path_s_mm_.assign(path_y_mm_.size(), 0.0);
+  for (std::size_t k = 1; k < path_y_mm_.size(); ++k) {
+    path_s_mm_[k] = path_s_mm_[k - 1] + std::hypot(path_y_mm_[k] - path_y_mm_[k - 1], path_arc_mm_[k] - path_arc_mm_[k - 1]);
+  }
+  for (std::size_t i = 0; i < patch::kGratings; ++i) {
+    const double gy = spec.gratings[i].centre.y_mm, ga = depth_radius_mm_ * spec.gratings[i].centre.r_deg * patch::kDegToRad;
+    double best = std::numeric_limits<double>::infinity();
+    grating_s_mm_[i] = 0.0;
+    for (std::size_t k = 1; k < path_y_mm_.size(); ++k) {
+      const double dy = path_y_mm_[k] - path_y_mm_[k - 1], da = path_arc_mm_[k] - path_arc_mm_[k - 1];
+      const double len2 = dy * dy + da * da;
+      const double t = len2 > 0 ? std::clamp(((gy - path_y_mm_[k - 1]) * dy + (ga - path_arc_mm_[k - 1]) * da) / len2, 0.0, 1.0) : 0.0;
+      const double d = std::hypot(path_y_mm_[k - 1] + t * dy - gy, path_arc_mm_[k - 1] + t * da - ga);
+      if (d < best) {
+        best = d;
+        grating_s_mm_[i] = path_s_mm_[k - 1] + t * std::sqrt(len2);
+      }
+    }
   }
   // Point-like probes saturate where the paper's 11 mm sphere does (a conservative, documented choice).
   point_force_limit_n_ = ContactLaw(thickness_mm_, spec.layer.material.youngs_modulus_kpa,
@@ -197,8 +225,28 @@ double SkinTwin::StiffeningFactor(double depth_mm) const noexcept {
   return mu > 0 ? c1 / mu : 1.0;
 }
 
+void SkinTwin::Pinch(const patch::SurfacePoint& at, double contact_radius_mm, double& pinched_from_s_mm) const noexcept {
+  const double cy = at.y_mm, ca = depth_radius_mm_ * at.r_deg * patch::kDegToRad;
+  const double reach = contact_radius_mm + effects_.hard_press.pinch_margin_mm;
+  for (std::size_t k = 1; k < path_y_mm_.size(); ++k) {
+    const double y0 = path_y_mm_[k - 1], a0 = path_arc_mm_[k - 1];
+    const double dy = path_y_mm_[k] - y0, da = path_arc_mm_[k] - a0;
+    const double len = std::hypot(dy, da);
+    if (!(len > 0)) continue;
+    const double t = std::clamp(((cy - y0) * dy + (ca - a0) * da) / (len * len), 0.0, 1.0);
+    const double d = std::hypot(y0 + t * dy - cy, a0 + t * da - ca);
+    if (d > reach) continue;
+    // The first point of this segment within reach of the contact: the pinch starts there.
+    const double half_chord = std::sqrt(std::max(0.0, reach * reach - d * d));
+    const double s = path_s_mm_[k - 1] + std::max(0.0, t * len - half_chord);
+    pinched_from_s_mm = std::min(pinched_from_s_mm, s);
+    return;  // segments come in order along the light's way: the first one in reach is the pinch
+  }
+}
+
 void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, std::uint32_t& flags) const noexcept {
   out.fill(0.0);
+  double pinched = std::numeric_limits<double>::infinity();  // path length from which the fibre is dark
   const patch::Region extent = spec_.Extent();
   for (const Contact& c : contacts) {
     if (!std::isfinite(c.force_n) || c.force_n < 0.0 || !std::isfinite(c.at.y_mm) || !std::isfinite(c.at.r_deg) ||
@@ -220,17 +268,20 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
         flags |= kFlagBadContact;
         continue;
       }
-      if (force > law->linear_limit_force_n()) {
-        force = law->linear_limit_force_n();
-        flags |= kFlagSaturated;
-      }
-      depth = law->DepthMm(force);
+      // Beyond the linear range the cover stiffens until it bottoms out (ContactLaw::HardForceN); the strain
+      // field is the linear layer's at the same depth. Flagged: the frame is beyond the linear range.
+      if (force > law->linear_limit_force_n()) flags |= kFlagSaturated;
+      depth = law->HardDepthMm(force);
       radius = std::min(c.probe.radius_mm, std::sqrt(c.probe.radius_mm * depth));
+      const double d_lin = ContactLaw::kLinearCompressionLimit * law->thickness_mm();
+      force = law->StrainForceN(force) * (effects_.stiffening ? StiffeningFactor(std::min(depth, d_lin)) : 1.0);
+      if (depth > effects_.hard_press.microbend_compression * thickness_mm_) Pinch(c.at, radius, pinched);
     } else if (force > point_force_limit_n_) {
       force = point_force_limit_n_;
       flags |= kFlagSaturated;
     }
-    const double f = force * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
+    const double f = c.probe.shape == Probe::Shape::kSphere ? force
+                                                            : force * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
     const double cr = c.at.r_deg * patch::kDegToRad;
     for (std::size_t i = 0; i < patch::kGratings; ++i) {
       double acc = 0.0;
@@ -243,6 +294,15 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
       }
       out[i] += f * acc;
     }
+  }
+  if (pinched < std::numeric_limits<double>::infinity()) {
+    // Microbending at the pinch: every grating from there on along the fibre is dark (its peak is lost); a
+    // grating reaching into the pinch (half its length) is split by the transverse load.
+    const double half = spec_.gratings[0].length_mm / 2.0;
+    for (std::size_t i = 0; i < patch::kGratings; ++i) {
+      if (grating_s_mm_[i] + half >= pinched) out[i] = std::numeric_limits<double>::quiet_NaN();
+    }
+    flags |= kFlagPeakMissing;
   }
 }
 
@@ -304,6 +364,7 @@ void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, 
                            std::uint32_t& flags) noexcept {
   const double dt_c = TemperatureC(t_s);
   const double band_pm = twin_.spec().fibre.band_half_width_nm * 1e3;
+  const double window_min_nm = twin_.spec().interrogator.window_min_nm, window_max_nm = twin_.spec().interrogator.window_max_nm;
   const auto& ref = twin_.reference_wavelength_nm();
   const auto& tc = twin_.temperature_pm_per_c();
   for (std::size_t i = 0; i < patch::kGratings; ++i) {
@@ -316,11 +377,17 @@ void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, 
       flags |= kFlagPeakMissing;
       continue;
     }
-    if (!(std::abs(shift) <= band_pm)) {  // the interrogator cannot follow a peak out of its band
-      shift = std::clamp(shift, -band_pm, band_pm);
-      flags |= kFlagSaturated;
+    // A raw peak stream reports a peak where it is: one that has left its band is sent at its wavelength
+    // (flagged in the twin's frame flags, which no interrogator stream carries); beyond the instrument's
+    // window it is not seen at all (lost).
+    if (!(std::abs(shift) <= band_pm)) flags |= kFlagSaturated;
+    const double nm = ref[i] + shift * 1e-3;
+    if (!(nm >= window_min_nm && nm <= window_max_nm)) {
+      wl[i] = std::numeric_limits<double>::quiet_NaN();
+      flags |= kFlagPeakMissing;
+      continue;
     }
-    wl[i] = ref[i] + shift * 1e-3;
+    wl[i] = nm;
   }
 }
 
@@ -334,6 +401,7 @@ std::string TwinEffects::Summary() const {
   if (temperature) add("temperature");
   if (viscoelastic) add("viscoelastic");
   if (!faults.empty()) add("faults");
+  if (hard_press_named) add("hard_press");
   if (skin_sample) add("skin_sample=" + std::to_string(skin_sample->seed));
   return s.empty() ? "none" : s;
 }

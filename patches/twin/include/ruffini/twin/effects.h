@@ -106,6 +106,18 @@ struct SkinSampleEffect {
   double wavelength_nm = 0.05;
 };
 
+// Hard presses (always modelled; a scene's `hard_press:` only changes the parameters). Beyond the layer's
+// linear range the contact law stiffens until the cover bottoms out (ContactLaw::HardForceN). Once the cover
+// under a sphere is compressed beyond microbend_compression (depth / thickness), the fibre where it passes
+// under the probe (within the contact radius + pinch_margin_mm of its centre, at the fibre's depth) is pinched
+// against the limb: microbending loss there, in both directions of the reflected light, darkens every grating
+// from that point on along the fibre, and a grating under the probe is split by the transverse load (its
+// peak is lost). See docs/twin.md, "Hard presses".
+struct HardPressParams {
+  double microbend_compression = 0.6;
+  double pinch_margin_mm = 1.0;
+};
+
 struct TwinEffects {
   std::optional<NoiseEffect> noise;
   std::optional<GainSpreadEffect> gain_spread;
@@ -115,6 +127,8 @@ struct TwinEffects {
   std::optional<ViscoelasticEffect> viscoelastic;
   std::vector<FaultEffect> faults;
   std::optional<SkinSampleEffect> skin_sample;
+  HardPressParams hard_press;  // always on (defaults); not in Summary() unless named
+  bool hard_press_named = false;
 
   // The seed for everything fabrication draws (gains, temperature spread, positions).
   [[nodiscard]] std::uint64_t fabrication_seed() const { return skin_sample ? skin_sample->seed : 0; }
