@@ -550,3 +550,39 @@ TEST(TwinExtremes, EffectsNamingAMissingGratingThrow) {
 
 }  // namespace
 }  // namespace ruffini::twin
+
+namespace ruffini::twin {
+namespace {
+
+// Two or more probes at once on one patch (issue 16): each probe's field comes from its own force through
+// its own contact law, and the fields add. In the linear range that is elasticity's superposition, exact;
+// beyond it (hard presses) it is our approximation (two bottomed-out footprints would interact).
+TEST(TwinMultiProbe, TwoProbesOnOnePatchSuperpose) {
+  const SkinTwin& twin = fixtures::DefaultTwin();
+  const Probe sphere{};
+  for (double f : {0.5, 2.0, 20.0}) {
+    const Contact a{{46.5, 57.5}, f, sphere}, b{{84.0, 87.5}, 0.7 * f, sphere};  // FBG 5 and FBG 9, 45 mm apart
+    const Contact both[2] = {a, b};
+    Shifts sa{}, sb{}, sab{};
+    std::uint32_t flags = 0;
+    twin.StrainShiftsPm(std::span<const Contact>(&a, 1), sa, flags);
+    twin.StrainShiftsPm(std::span<const Contact>(&b, 1), sb, flags);
+    twin.StrainShiftsPm(both, sab, flags);
+    for (std::size_t i = 0; i < patch::kGratings; ++i) EXPECT_NEAR(sab[i], sa[i] + sb[i], 1e-9) << f << " N, grating " << i + 1;
+    // Both presses are seen: each one's grating moves by more than it does under the other alone.
+    EXPECT_GT(sab[4], sb[4] + 0.5 * sa[4]);
+    EXPECT_GT(sab[8], sa[8] + 0.5 * sb[8]);
+  }
+  // A pinch by either probe darkens the fibre beyond it, whatever the other does.
+  const Contact light{{46.5, 57.5}, 0.5, sphere}, hard{{84.0, 87.5}, 200.0, sphere};
+  const Contact both[2] = {light, hard};
+  Shifts s{};
+  std::uint32_t flags = 0;
+  twin.StrainShiftsPm(both, s, flags);
+  EXPECT_TRUE(std::isfinite(s[4]));  // FBG 5 lies before the pinch on the fibre
+  EXPECT_TRUE(std::isnan(s[8]));     // FBG 9 is under it
+  EXPECT_TRUE(flags & kFlagPeakMissing);
+}
+
+}  // namespace
+}  // namespace ruffini::twin
