@@ -1,6 +1,6 @@
 #pragma once
 // Hard presses through the whole decode path of a live decoder, without sockets: the twin of one patch of
-// a scene -> its InterrogatorSim -> Hyperion bytes (peaks of the channel in ascending order, a missing peak
+// a scene (its edges as ruffini-sim sets them) -> its InterrogatorSim -> Hyperion bytes (peaks of the channel in ascending order, a missing peak
 // left out, as ruffini-sim sends them) -> the ingest codec with the decoder service's default picking
 // (NearestGratingBands) -> link::Monitor over the decoder service's default pipeline -> the messages the
 // aggregator would get. One press per point: 1.5 s untouched (the baseline capture), a 0.3 s ramp to the
@@ -18,6 +18,7 @@
 #include "ruffini/decode/model_io.h"
 #include "ruffini/ingest/hyperion.h"
 #include "ruffini/link/monitor.h"
+#include "ruffini/sim/scenario.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
 
@@ -39,7 +40,8 @@ class HardPressRig {
  public:
   HardPressRig(const twin::Scene& scene, std::size_t patch, const v1::DecoderModel& model, double rate_hz = 1000.0)
       : scene_(scene), patch_(patch), model_(model), rate_hz_(rate_hz),
-        twin_(scene.patches[patch].spec, scene.effects, {scene.probe.radius_mm}) {
+        mounts_(sim::LoadMounts(scene)),
+        twin_(scene.patches[patch].spec, sim::EffectsFor(scene, mounts_.get(), patch), {scene.probe.radius_mm}) {
     Wavelengths centre{};
     for (std::size_t i = 0; i < kGratings; ++i) centre[i] = scene.patches[patch].spec.gratings[i].wavelength_nm;
     codec_.pick = ingest::NearestGratingBands(0, centre);
@@ -137,6 +139,7 @@ class HardPressRig {
   std::size_t patch_;
   const v1::DecoderModel& model_;
   double rate_hz_;
+  std::unique_ptr<sim::MountedScene> mounts_;  // the scene's seams make edges `continued` (sim::EffectsFor)
   twin::SkinTwin twin_;
   ingest::DecoderConfig codec_;
   decode::PipelineConfig pipeline_config_;

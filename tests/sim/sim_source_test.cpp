@@ -257,3 +257,20 @@ TEST(ScriptedSource, ASeamProbePressesBothPatchesOfTheSeam) {
 }
 
 }  // namespace
+
+namespace {
+// With `edges` named, the sim makes every edge another patch's cover continues beyond `continued`: the
+// forearm seam (forearm_a's R = 145, forearm_b's R = 0); every other edge of the cobot's patches is free.
+TEST(ScriptedSource, SeamEdgesAreContinuedTheOthersFree) {
+  auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/cobot.yaml");
+  scene.effects.edges = twin::EdgeEffect{};
+  const auto mounts = sim::LoadMounts(scene);
+  using K = twin::EdgeEffect::Kind;
+  const auto a = sim::EffectsFor(scene, mounts.get(), 0).edges->kind;
+  const auto b = sim::EffectsFor(scene, mounts.get(), 1).edges->kind;
+  const auto u = sim::EffectsFor(scene, mounts.get(), 2).edges->kind;
+  EXPECT_EQ(a, (std::array<K, 4>{K::kFree, K::kFree, K::kFree, K::kContinued}));
+  EXPECT_EQ(b, (std::array<K, 4>{K::kFree, K::kFree, K::kContinued, K::kFree}));
+  EXPECT_EQ(u, (std::array<K, 4>{K::kFree, K::kFree, K::kFree, K::kFree}));
+}
+}  // namespace

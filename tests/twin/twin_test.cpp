@@ -586,3 +586,71 @@ TEST(TwinMultiProbe, TwoProbesOnOnePatchSuperpose) {
 
 }  // namespace
 }  // namespace ruffini::twin
+
+namespace ruffini::twin {
+namespace {
+
+TwinEffects WithEdges(TwinEffects e, EdgeEffect::Kind kind) {
+  EdgeEffect ed;
+  ed.kind.fill(kind);
+  e.edges = ed;
+  return e;
+}
+
+// Edges (docs/twin.md, "Edges"): the edge model leaves the interior alone, bit for bit. Every contact
+// farther than zone_mm (12 mm) from every edge, the whole indented area included, gives the same shifts.
+TEST(TwinEdges, TheInteriorIsUnchanged) {
+  const SkinTwin& plain = fixtures::DefaultTwin();
+  const SkinTwin free_edges(fixtures::Spec(), WithEdges(fixtures::DefaultScene().effects, EdgeEffect::Kind::kFree), {5.5});
+  const patch::Geometry g(fixtures::Spec());
+  const double zone_deg = g.RDeg(12.0);
+  for (double y = 12.0; y <= 138.0; y += 3.0) {
+    for (double r = zone_deg; r <= 145.0 - zone_deg; r += 3.0) {
+      for (double f : {0.3, 2.5, 50.0}) {
+        const Contact c{{y, r}, f, Probe{}};
+        const Shifts a = plain.StrainShiftsPm(c), b = free_edges.StrainShiftsPm(c);
+        for (std::size_t i = 0; i < patch::kGratings; ++i) {
+          if (std::isnan(a[i])) {
+            ASSERT_TRUE(std::isnan(b[i]));
+          } else {
+            ASSERT_EQ(a[i], b[i]) << y << " " << r << " " << f;
+          }
+        }
+      }
+    }
+  }
+}
+
+// Near an edge the image changes what the nearest gratings see: a free edge (the material escapes through
+// the traction-free face; Hetenyi's symmetric image) raises it, a bonded edge (a clamped face, the
+// antisymmetric image) lowers it; continued is the old twin. The taper is continuous at zone_mm.
+TEST(TwinEdges, AFreeEdgeRaisesABondedEdgeLowersTheNearestGratingsResponse) {
+  const auto& scene = fixtures::DefaultScene();
+  const SkinTwin plain(fixtures::Spec(), scene.effects, {5.5});
+  const SkinTwin free_edges(fixtures::Spec(), WithEdges(scene.effects, EdgeEffect::Kind::kFree), {5.5});
+  const SkinTwin bonded(fixtures::Spec(), WithEdges(scene.effects, EdgeEffect::Kind::kBonded), {5.5});
+  // FBG 1 (Y 24, R 42.5) and a press 4 mm inside the Y = 0 edge, 20 mm away along Y.
+  const Contact c{{4.0, 42.5}, 2.0, Probe{}};
+  const double p = plain.StrainShiftsPm(c)[0], fr = free_edges.StrainShiftsPm(c)[0], bo = bonded.StrainShiftsPm(c)[0];
+  EXPECT_NE(p, 0.0);
+  EXPECT_GT(std::abs(fr), std::abs(p));
+  EXPECT_LT(std::abs(bo), std::abs(p));
+  // Continuous at the zone's border: 11.99 and 12.01 mm from the edge differ by what 0.02 mm of travel does.
+  const Contact in{{11.99, 42.5}, 2.0, Probe{}}, out{{12.01, 42.5}, 2.0, Probe{}};
+  EXPECT_NEAR(free_edges.StrainShiftsPm(in)[0], free_edges.StrainShiftsPm(out)[0], 0.05);
+}
+
+// At a free edge the part of the footprint still on the cover bears the whole force: a hard press there
+// bottoms out sooner. 30 N 0.5 mm inside the elbow edge, on the fibre's entry (R 18), pinches the fibre
+// (every peak lost) with the cover ending there; with the layer continued it does not yet.
+TEST(TwinEdges, AHardPressOnAFreeEdgeBottomsOutSooner) {
+  const SkinTwin plain(fixtures::Spec(), TwinEffects{}, {5.5});
+  const SkinTwin free_edges(fixtures::Spec(), WithEdges(TwinEffects{}, EdgeEffect::Kind::kFree), {5.5});
+  const Contact c{{0.5, 18.0}, 30.0, Probe{}};
+  const Shifts a = plain.StrainShiftsPm(c), b = free_edges.StrainShiftsPm(c);
+  EXPECT_TRUE(std::isfinite(a[0]));
+  for (std::size_t i = 0; i < patch::kGratings; ++i) EXPECT_TRUE(std::isnan(b[i])) << i + 1;
+}
+
+}  // namespace
+}  // namespace ruffini::twin

@@ -101,6 +101,24 @@ std::vector<PatchLoad> ProbeLoads(const twin::Scene& scene, const MountedScene* 
   return loads;
 }
 
+twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch) {
+  twin::TwinEffects e = scene.effects;
+  if (!e.edges || mounts == nullptr || patch >= mounts->robot.patches.size()) return e;
+  // An edge another patch's cover continues beyond (a seam) is `continued`: probe 1 mm outside the middle
+  // of each edge and see whether another patch on the same link and cylinder covers that point.
+  const patch::PatchSpec& spec = scene.patches[patch].spec;
+  const patch::Geometry g(spec);
+  const double out_deg = g.RDeg(1.0), ym = 0.5 * spec.extent_y_mm, rm = 0.5 * spec.extent_r_deg;
+  const patch::SurfacePoint outside[4] = {{-1.0, rm}, {spec.extent_y_mm + 1.0, rm}, {ym, -out_deg},
+                                          {ym, spec.extent_r_deg + out_deg}};
+  for (std::size_t k = 0; k < 4; ++k) {
+    for (const PatchLoad& l : ProbeLoads(scene, mounts, patch, outside[k].y_mm, outside[k].r_deg, 0.0)) {
+      if (l.patch != patch) e.edges->kind[k] = twin::EdgeEffect::Kind::kContinued;
+    }
+  }
+  return e;
+}
+
 ScriptedSource::ScriptedSource(const twin::Scene& scene, Scenario scenario, double rate_hz)
     : scenario_(std::move(scenario)), probe_(scene.probe), rate_hz_(rate_hz) {
   if (scene.patches.empty() || scene.patches.size() > ingest::kChannels) {
@@ -108,13 +126,13 @@ ScriptedSource::ScriptedSource(const twin::Scene& scene, Scenario scenario, doub
                      " patches; a Hyperion frame carries 1..16 channels");
   }
   if (!(rate_hz_ > 0.0)) throw InputError("scripted source: the rate must be above 0");
+  mounts_ = LoadMounts(scene);
   for (std::size_t i = 0; i < scene.patches.size(); ++i) {
-    twins_.push_back(std::make_unique<twin::SkinTwin>(scene.patches[i].spec, scene.effects,
+    twins_.push_back(std::make_unique<twin::SkinTwin>(scene.patches[i].spec, EffectsFor(scene, mounts_.get(), i),
                                                       std::vector<double>{scene.probe.radius_mm}));
     sims_.push_back(std::make_unique<twin::InterrogatorSim>(*twins_.back(), twin::DeriveSeed(scenario_.seed, i)));
   }
   contacts_.reserve(scenario_.presses.size() * scene.patches.size());
-  mounts_ = LoadMounts(scene);
   for (const auto& p : scenario_.presses) {
     const twin::ContactLaw* law = twins_[p.patch]->contact_law(probe_);
     const double a = law != nullptr ? law->ContactRadiusMm(std::min(p.force_n, law->linear_limit_force_n()))

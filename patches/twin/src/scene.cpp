@@ -115,6 +115,22 @@ TwinEffects ReadEffects(YamlReader& e) {
     h->Finish();
     out.hard_press_named = true;
   }
+  if (auto ed = e.MapOr("edges")) {
+    EdgeEffect ee;
+    const char* names[4] = {"y_min", "y_max", "r_min", "r_max"};
+    for (int i = 0; i < 4; ++i) {
+      if (!ed->Has(names[i])) continue;
+      const std::string k = ed->Choice(names[i], {"continued", "free", "bonded"});
+      ee.kind[static_cast<std::size_t>(i)] = k == "continued" ? EdgeEffect::Kind::kContinued
+                                             : k == "free"    ? EdgeEffect::Kind::kFree
+                                                              : EdgeEffect::Kind::kBonded;
+    }
+    ee.free_image_gain = ed->NumberOr("free_image_gain", ee.free_image_gain, 0.0, 1.0);
+    ee.bonded_image_gain = ed->NumberOr("bonded_image_gain", ee.bonded_image_gain, -1.0, 0.0);
+    ee.zone_mm = ed->NumberOr("zone_mm", ee.zone_mm, 1.0, 40.0);
+    ed->Finish();
+    out.edges = ee;
+  }
   if (auto s = e.MapOr("skin_sample")) {
     SkinSampleEffect ss;
     ss.seed = static_cast<std::uint64_t>(s->IntegerOr("seed", static_cast<long>(ss.seed), 0, 1L << 40));

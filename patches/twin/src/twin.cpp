@@ -244,6 +244,53 @@ void SkinTwin::Pinch(const patch::SurfacePoint& at, double contact_radius_mm, do
   }
 }
 
+namespace {
+// The share of a Hertz footprint of radius a on the cover side of a straight edge the centre lies e inside
+// of (e < 0: outside): its parabolic line load integrated, 1/2 + 3/4 (s - s^3/3), s = e / a in [-1, 1].
+double FootprintFraction(double e_mm, double a_mm) noexcept {
+  if (!(a_mm > 0.0)) return e_mm >= 0.0 ? 1.0 : 0.0;
+  const double s = e_mm / a_mm;
+  if (s >= 1.0) return 1.0;
+  if (s <= -1.0) return 0.0;
+  return 0.5 + 0.75 * (s - s * s * s / 3.0);
+}
+}  // namespace
+
+double SkinTwin::CoverFraction(const patch::SurfacePoint& at, double contact_radius_mm) const noexcept {
+  const EdgeEffect& e = *effects_.edges;
+  const double dist[4] = {at.y_mm, spec_.extent_y_mm - at.y_mm, geometry_.ArcMm(at.r_deg),
+                          geometry_.ArcMm(spec_.extent_r_deg - at.r_deg)};
+  double f = 1.0;
+  for (std::size_t k = 0; k < 4; ++k) {
+    if (e.kind[k] == EdgeEffect::Kind::kFree) f *= FootprintFraction(dist[k], contact_radius_mm);
+  }
+  return std::max(f, 0.25);  // a contact on a corner: at least a quarter of the footprint bears
+}
+
+std::size_t SkinTwin::Sources(const patch::SurfacePoint& at, std::array<Source, 4>& out) const noexcept {
+  out[0] = Source{at.y_mm, at.r_deg, 1.0};
+  if (!effects_.edges) return 1;
+  const EdgeEffect& e = *effects_.edges;
+  auto gain = [&](std::size_t k, double dist_mm) {
+    if (e.kind[k] == EdgeEffect::Kind::kContinued || !(dist_mm < e.zone_mm)) return 0.0;
+    const double g = e.kind[k] == EdgeEffect::Kind::kFree ? e.free_image_gain : e.bonded_image_gain;
+    const double half = 0.5 * e.zone_mm;
+    return dist_mm <= half ? g : g * (e.zone_mm - dist_mm) / half;
+  };
+  // The nearer Y edge and the nearer R edge (a patch is far wider than two zones).
+  const bool y_low = at.y_mm <= 0.5 * spec_.extent_y_mm, r_low = at.r_deg <= 0.5 * spec_.extent_r_deg;
+  const double dy = y_low ? at.y_mm : spec_.extent_y_mm - at.y_mm;
+  const double dr = r_low ? geometry_.ArcMm(at.r_deg) : geometry_.ArcMm(spec_.extent_r_deg - at.r_deg);
+  const double gy = gain(y_low ? 0 : 1, dy), gr = gain(r_low ? 2 : 3, dr);
+  const double y_img = y_low ? -at.y_mm : 2.0 * spec_.extent_y_mm - at.y_mm;
+  const double r_img = r_low ? -at.r_deg : 2.0 * spec_.extent_r_deg - at.r_deg;
+  std::size_t n = 1;
+  if (gy != 0.0) out[n++] = Source{y_img, at.r_deg, gy};
+  if (gr != 0.0) out[n++] = Source{at.y_mm, r_img, gr};
+  if (gy != 0.0 && gr != 0.0) out[n++] = Source{y_img, r_img, gy * gr};  // the corner's image of the images
+  return n;
+}
+
 void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, std::uint32_t& flags) const noexcept {
   out.fill(0.0);
   double pinched = std::numeric_limits<double>::infinity();  // path length from which the fibre is dark
@@ -271,10 +318,15 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
       // Beyond the linear range the cover stiffens until it bottoms out (ContactLaw::HardForceN); the strain
       // field is the linear layer's at the same depth. Flagged: the frame is beyond the linear range.
       if (force > law->linear_limit_force_n()) flags |= kFlagSaturated;
-      depth = law->HardDepthMm(force);
+      // At a free edge the part of the footprint still on the cover carries the whole force: it is indented
+      // as deep as the whole footprint would be by force / fraction (only the hard range sees a difference).
+      const double on_cover = effects_.edges ? CoverFraction(c.at, law->ContactRadiusMm(std::min(force, law->linear_limit_force_n())))
+                                             : 1.0;
+      depth = law->HardDepthMm(force / on_cover);
       radius = std::min(c.probe.radius_mm, std::sqrt(c.probe.radius_mm * depth));
       const double d_lin = ContactLaw::kLinearCompressionLimit * law->thickness_mm();
-      force = law->StrainForceN(force) * (effects_.stiffening ? StiffeningFactor(std::min(depth, d_lin)) : 1.0);
+      force = law->StrainForceN(force / on_cover) * on_cover *
+              (effects_.stiffening ? StiffeningFactor(std::min(depth, d_lin)) : 1.0);
       if (depth > effects_.hard_press.microbend_compression * thickness_mm_) Pinch(c.at, radius, pinched);
     } else if (force > point_force_limit_n_) {
       force = point_force_limit_n_;
@@ -282,15 +334,21 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
     }
     const double f = c.probe.shape == Probe::Shape::kSphere ? force
                                                             : force * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
-    const double cr = c.at.r_deg * patch::kDegToRad;
+    // The contact and, near a free or bonded edge, its images across the edges (at most 4 sources).
+    std::array<Source, 4> sources{};
+    const std::size_t n_sources = Sources(c.at, sources);
     for (std::size_t i = 0; i < patch::kGratings; ++i) {
       double acc = 0.0;
-      for (const LobeGeo& l : lobes_[i]) {
-        const double dy = l.y_mm - c.at.y_mm;
-        const double darc = depth_radius_mm_ * (l.r_rad - cr);
-        const double u = dy * l.cos_d + darc * l.sin_d;
-        const double v = -dy * l.sin_d + darc * l.cos_d;
-        acc += l.scale * tables_->Lookup(radius, u, v);
+      for (std::size_t k = 0; k < n_sources; ++k) {
+        const Source& src = sources[k];
+        const double cr = src.r_deg * patch::kDegToRad;
+        for (const LobeGeo& l : lobes_[i]) {
+          const double dy = l.y_mm - src.y_mm;
+          const double darc = depth_radius_mm_ * (l.r_rad - cr);
+          const double u = dy * l.cos_d + darc * l.sin_d;
+          const double v = -dy * l.sin_d + darc * l.cos_d;
+          acc += src.weight * l.scale * tables_->Lookup(radius, u, v);
+        }
       }
       out[i] += f * acc;
     }
@@ -402,6 +460,7 @@ std::string TwinEffects::Summary() const {
   if (viscoelastic) add("viscoelastic");
   if (!faults.empty()) add("faults");
   if (hard_press_named) add("hard_press");
+  if (edges) add("edges");
   if (skin_sample) add("skin_sample=" + std::to_string(skin_sample->seed));
   return s.empty() ? "none" : s;
 }

@@ -67,6 +67,10 @@ struct MountedScene {
 std::vector<PatchLoad> ProbeLoads(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch, double y_mm,
                                   double r_deg, double contact_radius_mm);
 
+// The twin effects of patch `patch`: the scene's, with every edge another patch's cover continues beyond (a
+// seam, found through the mounts) made `continued` when the scene names `edges`.
+twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch);
+
 // The scene's mounts, when it has a robot section (nullptr otherwise).
 std::unique_ptr<MountedScene> LoadMounts(const twin::Scene& scene);
 
@@ -84,6 +88,7 @@ class ScriptedSource final : public FrameSource {
   ScriptedSource(const twin::Scene& scene, Scenario scenario, double rate_hz);
   ~ScriptedSource() override;
   [[nodiscard]] const Scenario& scenario() const noexcept { return scenario_; }
+  [[nodiscard]] const twin::SkinTwin& twin(std::size_t patch) const { return *twins_.at(patch); }
   // The patches press i loads (ProbeLoads; the shares sum to 1, or none on bare limb).
   [[nodiscard]] const std::vector<PatchLoad>& loads(std::size_t press) const { return loads_.at(press); }
   [[nodiscard]] std::size_t channels() const noexcept override { return twins_.size(); }

@@ -1,5 +1,6 @@
 #pragma once
 // The effects a scene may ask the twin to model. Each is optional: absent means not built, not simulated.
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -118,6 +119,23 @@ struct HardPressParams {
   double pinch_margin_mm = 1.0;
 };
 
+// The cover ends at the patch's edges (docs/twin.md, "Edges"). Each edge (Y = 0, Y = extent, R = 0,
+// R = extent) is `continued` (the layer goes on: a seam with a neighbouring cover; the old behaviour),
+// `free` (the cover ends: traction-free face) or `bonded` (the cover's end face is glued to a rigid rim).
+// Within zone_mm of a free or bonded edge a contact gets an image mirrored across the edge (Hetenyi's
+// method for the elastic quarter-space, its first term) of gain free_image_gain (a traction-free face) or
+// bonded_image_gain (a clamped face), tapered linearly to 0 from zone_mm / 2 to zone_mm; and at a free edge
+// the part of the probe's footprint still on the cover carries the whole force (it is indented as deep as
+// the whole footprint would be by F / fraction). Contacts farther than zone_mm from every such edge are
+// computed exactly as without edges.
+struct EdgeEffect {
+  enum class Kind { kContinued, kFree, kBonded };
+  std::array<Kind, 4> kind{Kind::kFree, Kind::kFree, Kind::kFree, Kind::kFree};  // y_min, y_max, r_min, r_max
+  double free_image_gain = 1.0;
+  double bonded_image_gain = -1.0;
+  double zone_mm = 12.0;
+};
+
 struct TwinEffects {
   std::optional<NoiseEffect> noise;
   std::optional<GainSpreadEffect> gain_spread;
@@ -128,6 +146,7 @@ struct TwinEffects {
   std::vector<FaultEffect> faults;
   std::optional<SkinSampleEffect> skin_sample;
   HardPressParams hard_press;  // always on (defaults); not in Summary() unless named
+  std::optional<EdgeEffect> edges;
   bool hard_press_named = false;
 
   // The seed for everything fabrication draws (gains, temperature spread, positions).

@@ -90,6 +90,13 @@ class SkinTwin {
     double scale;            // gain * transfer * pm/strain
   };
   [[nodiscard]] double StiffeningFactor(double depth_mm) const noexcept;
+  struct Source {
+    double y_mm = 0.0, r_deg = 0.0, weight = 0.0;
+  };
+  // The contact and its edge images (effects.edges); returns how many of out are set.
+  std::size_t Sources(const patch::SurfacePoint& at, std::array<Source, 4>& out) const noexcept;
+  // The share of the footprint on the cover (free edges only), at least 1/4.
+  [[nodiscard]] double CoverFraction(const patch::SurfacePoint& at, double contact_radius_mm) const noexcept;
   // Lowers pinched_from_s_mm to the fibre path length where a hard press at `at` pinches the fibre, if it does.
   void Pinch(const patch::SurfacePoint& at, double contact_radius_mm, double& pinched_from_s_mm) const noexcept;
 
