@@ -340,9 +340,11 @@ TEST(Scenes, CobotSceneLoadsForTheTwin) {
   ASSERT_EQ(cobot.patches.size(), 4u);
   EXPECT_EQ(cobot.patches[1].name, "forearm_b");
   EXPECT_EQ(cobot.Patch("upper_arm_b").spec.surface_radius_mm, 37.4);
-  // Its twin section is the bench scene's: the same effects and probe.
+  // Its twin section is the bench scene's (the same effects and probe) plus where its covers end (edges).
   const Scene& bench = DefaultScene();
-  EXPECT_EQ(cobot.effects.Summary(), bench.effects.Summary());
+  EXPECT_EQ(cobot.effects.Summary(), bench.effects.Summary() + ",edges");
+  ASSERT_TRUE(cobot.effects.edges.has_value());
+  EXPECT_FALSE(bench.effects.edges.has_value());
   EXPECT_EQ(cobot.probe.radius_mm, bench.probe.radius_mm);
   EXPECT_EQ(cobot.load_cell.noise_n, bench.load_cell.noise_n);
   EXPECT_EQ(cobot.patches[0].model_path, bench.patches[0].model_path);

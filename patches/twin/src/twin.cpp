@@ -459,9 +459,9 @@ std::string TwinEffects::Summary() const {
   if (temperature) add("temperature");
   if (viscoelastic) add("viscoelastic");
   if (!faults.empty()) add("faults");
+  if (skin_sample) add("skin_sample=" + std::to_string(skin_sample->seed));
   if (hard_press_named) add("hard_press");
   if (edges) add("edges");
-  if (skin_sample) add("skin_sample=" + std::to_string(skin_sample->seed));
   return s.empty() ? "none" : s;
 }
 
