@@ -274,3 +274,19 @@ TEST(ScriptedSource, SeamEdgesAreContinuedTheOthersFree) {
   EXPECT_EQ(u, (std::array<K, 4>{K::kFree, K::kFree, K::kFree, K::kFree}));
 }
 }  // namespace
+
+namespace {
+// A patch's own cast (the scene's `twin.casts`) reaches the live twin: forearm_b cast 5, the others the
+// scene's cast 0.
+TEST(ScriptedSource, EachPatchIsItsOwnCast) {
+  auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/cobot.yaml");
+  scene.patches[1].cast_seed = 5;
+  sim::Scenario s;
+  s.duration_s = 1.0;
+  sim::ScriptedSource src(scene, s, 1000.0);
+  EXPECT_EQ(src.twin(1).effects().skin_sample->seed, 5u);
+  EXPECT_EQ(src.twin(0).effects().skin_sample->seed, 0u);
+  EXPECT_NE(src.twin(0).gain(), src.twin(1).gain());
+  EXPECT_EQ(src.twin(0).gain(), src.twin(2).gain());
+}
+}  // namespace

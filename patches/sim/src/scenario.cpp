@@ -102,7 +102,7 @@ std::vector<PatchLoad> ProbeLoads(const twin::Scene& scene, const MountedScene* 
 }
 
 twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch) {
-  twin::TwinEffects e = scene.effects;
+  twin::TwinEffects e = scene.EffectsOf(patch);  // the patch's own cast, if it names one
   if (!e.edges || mounts == nullptr || patch >= mounts->robot.patches.size()) return e;
   // An edge another patch's cover continues beyond (a seam) is `continued`: probe 1 mm outside the middle
   // of each edge and see whether another patch on the same link and cylinder covers that point.

@@ -1,4 +1,6 @@
 #include "ruffini/twin/scene.h"
+
+#include <algorithm>
 #include "ruffini/twin/twin.h"
 #include "ruffini/twin/viscoelastic.h"
 
@@ -169,7 +171,8 @@ Scene LoadScene(const std::string& path) {
     s.patches.push_back(ScenePatch{.name = p.name,
                                    .spec_path = p.spec_path,
                                    .spec = patch::LoadPatchSpec(p.spec_path),
-                                   .model_path = p.model_path});
+                                   .model_path = p.model_path,
+                                   .cast_seed = std::nullopt});
   }
   if (auto& t = file.twin) {
     if (auto pr = t->MapOr("probe")) {
@@ -183,9 +186,29 @@ Scene LoadScene(const std::string& path) {
       lc->Finish();
     }
     if (auto e = t->MapOr("effects")) s.effects = ReadEffects(*e);
+    if (t->Has("casts")) {
+      // casts: [{patch: forearm_b, skin_sample: 3}, ...]: each patch its own cast of the design.
+      for (YamlReader& c : t->Sequence("casts")) {
+        const std::string name = c.String("patch");
+        auto it = std::find_if(s.patches.begin(), s.patches.end(), [&](const ScenePatch& p) { return p.name == name; });
+        if (it == s.patches.end()) c.Fail("patch", "is not a patch of this scene");
+        if (it->cast_seed) c.Fail("patch", "has a cast already");
+        it->cast_seed = static_cast<std::uint64_t>(c.Integer("skin_sample", 0, 1L << 40));
+        c.Finish();
+      }
+    }
     t->Finish();
   }
   return s;
+}
+
+TwinEffects Scene::EffectsOf(std::size_t patch) const {
+  TwinEffects e = effects;
+  if (patch < patches.size() && patches[patch].cast_seed) {
+    if (!e.skin_sample) e.skin_sample = SkinSampleEffect{};
+    e.skin_sample->seed = *patches[patch].cast_seed;
+  }
+  return e;
 }
 
 void OverrideSkinSample(Scene& scene, std::uint64_t seed) {

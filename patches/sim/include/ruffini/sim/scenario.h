@@ -67,7 +67,7 @@ struct MountedScene {
 std::vector<PatchLoad> ProbeLoads(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch, double y_mm,
                                   double r_deg, double contact_radius_mm);
 
-// The twin effects of patch `patch`: the scene's, with every edge another patch's cover continues beyond (a
+// The twin effects of patch `patch`: the scene's with the patch's own cast (Scene::EffectsOf), and every edge another patch's cover continues beyond (a
 // seam, found through the mounts) made `continued` when the scene names `edges`.
 twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch);
 
