@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <chrono>
 #include <filesystem>
 #include <string>
@@ -46,10 +47,12 @@ TEST(HardPressProcess, A200NewtonEdgePressReachesTheAggregatorAsOverRangeContact
                    agg.address(), "--metrics", "127.0.0.1:0", "--ports-file", dec_dir + "/ports", "--rate-hz", "1000",
                    "--silence-ms", "100"},
                   dec_dir);
-  // The press holds from 2.3 s to 3.3 s of the script; the decoder connects within it or its next loop.
-  const auto over_range = [](const std::vector<rt::Received>& r) {
-    return std::count_if(r.begin(), r.end(), [](const rt::Received& m) {
-             return m.message.has_contact() && m.message.contact().over_range();
+  // The script loops every 8 s (8000 samples at 1 kHz; a message's serial is its frame's sample): the press
+  // ramps from 4.0 s, holds 4.3..5.3 s and is released by 5.6 s.
+  const auto in_press = [](std::uint64_t serial) { return serial % 8000 >= 4000 && serial % 8000 < 5700; };
+  const auto over_range = [&](const std::vector<rt::Received>& r) {
+    return std::count_if(r.begin(), r.end(), [&](const rt::Received& m) {
+             return m.message.has_contact() && m.message.contact().over_range() && in_press(m.message.interrogator_serial());
            }) >= 50;
   };
   ASSERT_TRUE(agg.WaitFor(over_range, 20s)) << dec.stderr_text() << sim.stderr_text();
@@ -60,6 +63,7 @@ TEST(HardPressProcess, A200NewtonEdgePressReachesTheAggregatorAsOverRangeContact
     const auto& c = m.message.contact();
     if (c.onset()) onset_seen = true;
     if (!c.over_range()) continue;
+    EXPECT_TRUE(in_press(m.message.interrogator_serial())) << "over range at rest, sample " << m.message.interrogator_serial();
     // "At least" the stated bound, and the force says so: the aggregator's threshold rule (1.5 N) stops.
     EXPECT_FLOAT_EQ(c.force_lower_bound_n(), 2.5f);
     EXPECT_GE(c.force_n(), c.force_lower_bound_n());
