@@ -232,6 +232,9 @@ struct SimServer::Impl {
         const double nm = peaks[c][g];
         if (!std::isnan(nm) && !(c == 0 && g == missing_grating)) seen[c][n++] = nm;  // a dark grating is left out
       }
+      // The instrument lists a channel's peaks by wavelength: a hard press can push a peak past its
+      // neighbour's (docs/twin.md, "Hard presses").
+      std::sort(seen[c].begin(), seen[c].begin() + static_cast<std::ptrdiff_t>(n));
       if (c == 0 && Every(f.nan_every, k)) {
         seen[0][0] = std::numeric_limits<double>::quiet_NaN();
         n = std::max<std::size_t>(n, 1);

@@ -11,6 +11,7 @@
 #include <set>
 #include <string>
 #include <tuple>
+#include <vector>
 
 #include "ruffini/error.h"
 #include "ruffini/patch/spec_loader.h"
@@ -94,19 +95,20 @@ TEST(PipelineTest, BadInputGetsItsReasonNeverAForce) {
     std::string what;
     std::function<void(Wavelengths&, std::uint32_t&)> make;
     Reason reason;
+    bool over_range = false;  // evidence of more load than the model knows: an over-range contact
   };
   const double one_band_up = Spec().gratings[4].wavelength_nm - Spec().gratings[3].wavelength_nm;
   const std::vector<Row> table = {
-      {"saturated flag", [](Wavelengths&, std::uint32_t& fl) { fl = Pipeline<float>::kSourceSaturated; }, Reason::kSaturated},
+      {"saturated flag", [](Wavelengths&, std::uint32_t& fl) { fl = Pipeline<float>::kSourceSaturated; }, Reason::kSaturated, true},
       {"all peaks at 0 nm", [](Wavelengths& w, std::uint32_t&) { w.fill(0.0); }, Reason::kNoSignal},
       {"all peaks missing", [](Wavelengths& w, std::uint32_t&) { w.fill(kNaN); }, Reason::kNoSignal},
-      {"one grating +5 nm", [](Wavelengths& w, std::uint32_t&) { w[3] += 5.0; }, Reason::kOutOfBand},
-      {"one grating -1.3 nm", [](Wavelengths& w, std::uint32_t&) { w[3] -= 1.3; }, Reason::kOutOfBand},
-      {"a grating reads its neighbour's peak", [=](Wavelengths& w, std::uint32_t&) { w[3] += one_band_up; }, Reason::kOutOfBand},
+      {"one grating +5 nm", [](Wavelengths& w, std::uint32_t&) { w[3] += 5.0; }, Reason::kOutOfBand, true},
+      {"one grating -1.3 nm", [](Wavelengths& w, std::uint32_t&) { w[3] -= 1.3; }, Reason::kOutOfBand, true},
+      {"a grating reads its neighbour's peak", [=](Wavelengths& w, std::uint32_t&) { w[3] += one_band_up; }, Reason::kOutOfBand, true},
       {"one peak at +inf", [](Wavelengths& w, std::uint32_t&) { w[3] = std::numeric_limits<double>::infinity(); }, Reason::kOk},
       {"four peaks missing", [](Wavelengths& w, std::uint32_t&) { w[1] = w[5] = w[9] = w[13] = kNaN; }, Reason::kTooManyMissing},
-      {"one grating +1.1 nm (in band, beyond the known range)", [](Wavelengths& w, std::uint32_t&) { w[3] += 1.1; }, Reason::kOutOfRange},
-      {"one grating -0.4 nm (beyond the known range)", [](Wavelengths& w, std::uint32_t&) { w[3] -= 0.4; }, Reason::kOutOfRange},
+      {"one grating +1.1 nm (in band, beyond the known range)", [](Wavelengths& w, std::uint32_t&) { w[3] += 1.1; }, Reason::kOutOfRange, true},
+      {"one grating -0.4 nm (beyond the known range)", [](Wavelengths& w, std::uint32_t&) { w[3] -= 0.4; }, Reason::kOutOfRange, true},
   };
   for (const bool with_range : {true, false}) {
     auto model = testing::SyntheticModel(Spec());
@@ -129,11 +131,16 @@ TEST(PipelineTest, BadInputGetsItsReasonNeverAForce) {
       }
       EXPECT_FALSE(o.valid);
       EXPECT_EQ(o.reason, row.reason) << "got " << ReasonName(o.reason);
-      EXPECT_EQ(o.force_n, 0.0f);
-      EXPECT_FALSE(o.in_contact);
+      EXPECT_EQ(o.over_range, row.over_range);
+      // Never a hard press read as light: over range is a contact of at least the stated force.
+      EXPECT_EQ(o.force_n, row.over_range ? static_cast<float>(cfg.over_range_force_n) : 0.0f);
+      EXPECT_EQ(o.in_contact, row.over_range);
       EXPECT_FALSE(o.located);
       const auto r = static_cast<std::size_t>(row.reason);
       EXPECT_EQ(f.data.counters().invalid[r], before.invalid[r] + 1);
+      EXPECT_EQ(f.data.counters().over_range, before.over_range + (row.over_range ? 1 : 0));
+      // A frame at rest ends an over-range contact the way a release ends any contact.
+      f.Press(0.0f);
     }
     // Nothing of that reached the baseline or the networks: a real press decodes exactly (less the
     // 1/3000 the onset frame costs it, baseline.h).
@@ -142,6 +149,87 @@ TEST(PipelineTest, BadInputGetsItsReasonNeverAForce) {
     EXPECT_TRUE(o.valid);
     EXPECT_NEAR(o.force_n, 0.120f, 1e-4f);
   }
+}
+
+// Peaks lost under load: while a contact is open, two or more peaks lost at once (a pinched fibre darkens
+// every grating beyond the pinch), too many or all of them, make the frame over range; the same frames at
+// rest are a dimmed grating (one peak: decoded from the others) or a fault's evidence (invalid, no contact).
+TEST(PipelineTest, PeaksLostUnderLoadAreOverRangeAtRestTheyAreNot) {
+  auto model = WithRange(testing::SyntheticModel(Spec()), -20.0f, 150.0f, 80.0f);
+  PipelineConfig cfg = Open();
+  struct Row {
+    std::string what;
+    std::vector<std::size_t> lost;
+    Reason at_rest;
+  };
+  const std::vector<Row> table = {
+      {"two peaks lost", {10, 11}, Reason::kOk},
+      {"the fibre dark from FBG 9 on", {8, 9, 10, 11, 12, 13, 14, 15}, Reason::kTooManyMissing},
+      {"every peak lost", {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15}, Reason::kNoSignal},
+  };
+  for (const Row& row : table) {
+    SCOPED_TRACE(row.what);
+    Fixture f(model, cfg);
+    Wavelengths wl = Nominal();
+    for (std::size_t i : row.lost) wl[i] = kNaN;
+    const auto rest = f.pipe.Process(wl, kFlagPeakMissing, f.data);
+    EXPECT_FALSE(rest.over_range);
+    EXPECT_FALSE(rest.in_contact);
+    EXPECT_EQ(rest.reason, row.at_rest);
+    // Under load: a press of 120 pm on FBG 4 (0.12 N), then the same peaks lost with it.
+    for (int k = 0; k < 3; ++k) ASSERT_TRUE(f.Press(120.0f).in_contact);
+    wl[3] += 0.120;
+    const auto o = f.pipe.Process(wl, kFlagPeakMissing, f.data);
+    EXPECT_TRUE(o.over_range);
+    EXPECT_TRUE(o.in_contact);
+    EXPECT_FALSE(o.valid);
+    EXPECT_EQ(o.force_n, 2.5f);
+    // It stays over range while the peaks stay lost, whatever the rest shows.
+    EXPECT_TRUE(f.pipe.Process(wl, kFlagPeakMissing, f.data).over_range);
+  }
+  // One lost peak under load is a dimmed grating's dropout: decoded from the others, as before.
+  Fixture f(model, cfg);
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(f.Press(120.0f).in_contact);
+  Wavelengths wl = Nominal();
+  wl[3] += 0.120;
+  wl[12] = kNaN;
+  const auto o = f.pipe.Process(wl, kFlagPeakMissing, f.data);
+  EXPECT_TRUE(o.valid);
+  EXPECT_FALSE(o.over_range);
+  EXPECT_NEAR(o.force_n, 0.120f, 1e-3f);
+}
+
+// After an over-range stretch the decoder resumes: the baseline did not move, a release is reported and a
+// light press decodes exactly again.
+TEST(PipelineTest, AfterOverRangeTheBaselineIsIntactAndTheNextPressDecodes) {
+  auto model = WithRange(testing::SyntheticModel(Spec()), -20.0f, 150.0f, 80.0f);
+  Fixture f(model, Open());
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(f.Press(120.0f).in_contact);
+  for (int k = 0; k < 50; ++k) {
+    const auto o = f.Press(900.0f);  // beyond the known range (230 pm)
+    ASSERT_TRUE(o.over_range);
+    ASSERT_GE(o.force_n, 2.5f);
+  }
+  EXPECT_EQ(f.data.counters().over_range, 50u);
+  // Only the onset frame of the light press reached the baseline (1/3000 of 120 pm, baseline.h).
+  for (std::size_t i = 0; i < 16; ++i) EXPECT_NEAR(f.data.baseline().baseline_nm()[i], Nominal()[i], 1e-4);
+  bool released = false;
+  for (int k = 0; k < 200 && !released; ++k) released = !f.Press(0.0f).in_contact;
+  EXPECT_TRUE(released);
+  const auto o = f.Press(120.0f);
+  EXPECT_TRUE(o.valid);
+  EXPECT_FALSE(o.over_range);
+  EXPECT_NEAR(o.force_n, 0.120f, 1e-3f);
+}
+
+TEST(PipelineTest, OverRangeSettingsAreChecked) {
+  const auto model = testing::SyntheticModel(Spec());
+  PipelineConfig bad = Open();
+  bad.over_range_force_n = 0.0;
+  EXPECT_THROW(Pipeline<float>(model, Spec(), ConfigFor(model, bad)), InputError);
+  bad = Open();
+  bad.over_range_missing = 0;
+  EXPECT_THROW(Pipeline<float>(model, Spec(), ConfigFor(model, bad)), InputError);
 }
 
 TEST(PipelineTest, ReasonNamesAreDistinct) {

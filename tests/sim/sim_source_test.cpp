@@ -7,6 +7,7 @@
 #include "ruffini/error.h"
 #include "ruffini/ingest/hyperion.h"
 #include "ruffini/sim/command.h"
+#include "ruffini/sim/scenario.h"
 #include "ruffini/sim/source.h"
 
 namespace {
@@ -183,4 +184,109 @@ TEST(ScriptedSource, AViscoelasticSceneCreepsUnderAHeldPressAndLeavesAResidual) 
   EXPECT_LT(d_after, 0.2 * d_early);
 }
 
+// One probe, any point of the limb (issue 16): on config/scenes/cobot.yaml forearm_b is forearm_a turned
+// 145 deg about the limb, so forearm_a's R = 145 edge is forearm_b's R = 0 edge (the seam).
+TEST(ProbeLoads, ASeamProbeLoadsBothForearmPatchesAndTheForcesSumToTheProbes) {
+  const auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/cobot.yaml");
+  const auto mounts = sim::LoadMounts(scene);
+  ASSERT_NE(mounts, nullptr);
+  const double a = 3.5;  // contact radius, mm
+  // On the seam: half each, both at Y 75, at their own edges.
+  auto loads = sim::ProbeLoads(scene, mounts.get(), 0, 75.0, 145.0, a);
+  ASSERT_EQ(loads.size(), 2u);
+  EXPECT_EQ(loads[0].patch, 0u);
+  EXPECT_EQ(loads[1].patch, 1u);
+  EXPECT_NEAR(loads[0].share, 0.5, 1e-6);
+  EXPECT_NEAR(loads[1].share, 0.5, 1e-6);
+  EXPECT_NEAR(loads[0].r_deg, 145.0, 1e-6);
+  EXPECT_NEAR(loads[1].r_deg, 0.0, 1e-6);
+  EXPECT_NEAR(loads[1].y_mm, 75.0, 1e-6);
+  // The same probe named from the other patch is the same probe.
+  const auto from_b = sim::ProbeLoads(scene, mounts.get(), 1, 75.0, 0.0, a);
+  ASSERT_EQ(from_b.size(), 2u);
+  EXPECT_NEAR(from_b[0].share, 0.5, 1e-6);
+  // 1 mm of arc onto forearm_a (1.53 deg): the parabolic line load gives it 1/2 + 3/4 (s - s^3/3), s = 1/3.5.
+  const double s1 = 1.0 / a, expected = 0.5 + 0.75 * (s1 - s1 * s1 * s1 / 3.0);
+  loads = sim::ProbeLoads(scene, mounts.get(), 0, 75.0, 145.0 - 1.0 / (37.4 * 3.14159265358979 / 180.0), a);
+  ASSERT_EQ(loads.size(), 2u);
+  EXPECT_NEAR(loads[0].share, expected, 1e-3);
+  EXPECT_NEAR(loads[0].share + loads[1].share, 1.0, 1e-12);
+  // Inside forearm_a, one patch, the whole force, where it was.
+  loads = sim::ProbeLoads(scene, mounts.get(), 0, 75.0, 100.0, a);
+  ASSERT_EQ(loads.size(), 1u);
+  EXPECT_DOUBLE_EQ(loads[0].share, 1.0);
+  EXPECT_DOUBLE_EQ(loads[0].r_deg, 100.0);
+  // forearm_a's R 200 lies on forearm_b (its R 55); its R 300 (= -60) is bare limb: nothing is pressed.
+  loads = sim::ProbeLoads(scene, mounts.get(), 0, 75.0, 200.0, a);
+  ASSERT_EQ(loads.size(), 1u);
+  EXPECT_EQ(loads[0].patch, 1u);
+  EXPECT_NEAR(loads[0].r_deg, 55.0, 1e-6);
+  EXPECT_TRUE(sim::ProbeLoads(scene, mounts.get(), 0, 75.0, 300.0, a).empty());
+  // The upper-arm patches are on another link: a forearm probe never reaches them.
+  for (const auto& l : sim::ProbeLoads(scene, mounts.get(), 0, 75.0, 145.0, a)) EXPECT_LT(l.patch, 2u);
+}
+
+// The live twin: one scripted seam probe moves the peaks of both forearm patches (channels 0 and 1), none
+// of the upper arm's; a scene without mounts keeps the old rule (the named patch only).
+TEST(ScriptedSource, ASeamProbePressesBothPatchesOfTheSeam) {
+  const auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/cobot.yaml");
+  sim::Scenario s;
+  s.duration_s = 2.0;
+  // 20 N: the seam is 25 mm from the nearest gratings (the blind band of issue 16), 3 N would move them by
+  // about 1.5 pm, hardly above the noise.
+  sim::Press p{0.5, 0, 60.0, 145.0, 20.0, 0.1, 0.5, 0.1};
+  s.presses.push_back(p);
+  sim::ScriptedSource src(scene, s, 1000.0);
+  ASSERT_EQ(src.channels(), 4u);
+  ASSERT_EQ(src.loads(0).size(), 2u);
+  double sum = 0.0;
+  for (const auto& l : src.loads(0)) sum += l.share * p.force_n;
+  EXPECT_NEAR(sum, 20.0, 1e-12);
+  std::vector<Wavelengths> rest(4), held(4);
+  src.Sample(100, rest);
+  src.Sample(900, held);
+  for (std::size_t c = 0; c < 4; ++c) {
+    double max_shift = 0.0;
+    for (std::size_t g = 0; g < kGratings; ++g) max_shift = std::max(max_shift, std::abs(held[c][g] - rest[c][g]));
+    if (c < 2) {
+      EXPECT_GT(max_shift, 0.002) << "channel " << c;  // above 2 pm (0.3 pm noise)
+    } else {
+      EXPECT_LT(max_shift, 0.002) << "channel " << c;
+    }
+  }
+}
+
+}  // namespace
+
+namespace {
+// With `edges` named, the sim makes every edge another patch's cover continues beyond `continued`: the
+// forearm seam (forearm_a's R = 145, forearm_b's R = 0); every other edge of the cobot's patches is free.
+TEST(ScriptedSource, SeamEdgesAreContinuedTheOthersFree) {
+  auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/cobot.yaml");
+  scene.effects.edges = twin::EdgeEffect{};
+  const auto mounts = sim::LoadMounts(scene);
+  using K = twin::EdgeEffect::Kind;
+  const auto a = sim::EffectsFor(scene, mounts.get(), 0).edges->kind;
+  const auto b = sim::EffectsFor(scene, mounts.get(), 1).edges->kind;
+  const auto u = sim::EffectsFor(scene, mounts.get(), 2).edges->kind;
+  EXPECT_EQ(a, (std::array<K, 4>{K::kFree, K::kFree, K::kFree, K::kContinued}));
+  EXPECT_EQ(b, (std::array<K, 4>{K::kFree, K::kFree, K::kContinued, K::kFree}));
+  EXPECT_EQ(u, (std::array<K, 4>{K::kFree, K::kFree, K::kFree, K::kFree}));
+}
+}  // namespace
+
+namespace {
+// A patch's own cast (the scene's `twin.casts`) reaches the live twin: forearm_b cast 5, the others the
+// scene's cast 0.
+TEST(ScriptedSource, EachPatchIsItsOwnCast) {
+  auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/cobot.yaml");
+  scene.patches[1].cast_seed = 5;
+  sim::Scenario s;
+  s.duration_s = 1.0;
+  sim::ScriptedSource src(scene, s, 1000.0);
+  EXPECT_EQ(src.twin(1).effects().skin_sample->seed, 5u);
+  EXPECT_EQ(src.twin(0).effects().skin_sample->seed, 0u);
+  EXPECT_NE(src.twin(0).gain(), src.twin(1).gain());
+  EXPECT_EQ(src.twin(0).gain(), src.twin(2).gain());
+}
 }  // namespace

@@ -315,6 +315,53 @@ TEST_F(SceneFiles, UnknownEffectKeyIsNamedWithItsPlace) {
   }
 }
 
+// Casts (issue 16): each patch may name its own cast (skin sample) in the twin section, and its own model
+// file (`model:`). A patch without one is the scene's cast; a twin built from EffectsOf is that cast.
+TEST_F(SceneFiles, EachPatchMayNameItsOwnCastAndModel) {
+  const std::string models = std::string(RUFFINI_SOURCE_DIR) + "/config/models/";
+  const std::string text = "name: casts\n"
+                           "patches:\n"
+                           "  - {name: a, spec: " + SpecPath() + ", model: " + models + "forearm.rmodel}\n"
+                           "  - {name: b, spec: " + SpecPath() + ", model: " + models + "forearm-field.rmodel}\n"
+                           "  - {name: c, spec: " + SpecPath() + "}\n"
+                           "twin:\n"
+                           "  effects:\n"
+                           "    gain_spread: {sigma: 0.1}\n"
+                           "    skin_sample: {seed: 0, position_mm: 1.0}\n"
+                           "  casts:\n"
+                           "    - {patch: b, skin_sample: 7}\n";
+  const auto s = LoadScene(Write("casts.yaml", text));
+  ASSERT_EQ(s.patches.size(), 3u);
+  EXPECT_FALSE(s.patches[0].cast_seed.has_value());
+  EXPECT_EQ(s.patches[1].cast_seed, 7u);
+  EXPECT_NE(s.patches[0].model_path, s.patches[1].model_path);
+  EXPECT_EQ(s.EffectsOf(0).skin_sample->seed, 0u);
+  EXPECT_EQ(s.EffectsOf(1).skin_sample->seed, 7u);
+  EXPECT_EQ(s.EffectsOf(1).skin_sample->position_mm, 1.0);  // the scene's cast parameters, another draw
+  const SkinTwin a(s.patches[0].spec, s.EffectsOf(0)), b(s.patches[1].spec, s.EffectsOf(1)), c(s.patches[2].spec, s.EffectsOf(2));
+  EXPECT_NE(a.gain(), b.gain());
+  EXPECT_NE(a.reference_wavelength_nm(), b.reference_wavelength_nm());
+  EXPECT_EQ(a.gain(), c.gain());
+  EXPECT_EQ(a.reference_wavelength_nm(), c.reference_wavelength_nm());
+  // Validated: a cast for a patch the scene does not have, two casts for one patch, a negative seed.
+  const std::string head = "name: casts\npatches:\n  - {name: a, spec: " + SpecPath() + "}\ntwin:\n  casts:\n";
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"    - {patch: z, skin_sample: 1}\n", "is not a patch of this scene"},
+      {"    - {patch: a, skin_sample: 1}\n    - {patch: a, skin_sample: 2}\n", "has a cast already"},
+      {"    - {patch: a, skin_sample: -1}\n", "skin_sample"},
+      {"    - {patch: a, skin_sample: 1, colour: red}\n", "colour"},
+  };
+  for (const auto& [casts, what] : bad) {
+    try {
+      (void)LoadScene(Write("bad-casts.yaml", head + casts));
+      ADD_FAILURE() << "accepted: " << casts;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("bad-casts.yaml"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST_F(SceneFiles, MissingPatchSpecIsNamed) {
   const auto abs_path = Write("abs.yaml", SceneText("/no/such/dir/arm.yaml", ""));
   try {
@@ -340,9 +387,11 @@ TEST(Scenes, CobotSceneLoadsForTheTwin) {
   ASSERT_EQ(cobot.patches.size(), 4u);
   EXPECT_EQ(cobot.patches[1].name, "forearm_b");
   EXPECT_EQ(cobot.Patch("upper_arm_b").spec.surface_radius_mm, 37.4);
-  // Its twin section is the bench scene's: the same effects and probe.
+  // Its twin section is the bench scene's (the same effects and probe) plus where its covers end (edges).
   const Scene& bench = DefaultScene();
-  EXPECT_EQ(cobot.effects.Summary(), bench.effects.Summary());
+  EXPECT_EQ(cobot.effects.Summary(), bench.effects.Summary() + ",edges");
+  ASSERT_TRUE(cobot.effects.edges.has_value());
+  EXPECT_FALSE(bench.effects.edges.has_value());
   EXPECT_EQ(cobot.probe.radius_mm, bench.probe.radius_mm);
   EXPECT_EQ(cobot.load_cell.noise_n, bench.load_cell.noise_n);
   EXPECT_EQ(cobot.patches[0].model_path, bench.patches[0].model_path);

@@ -82,6 +82,9 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
   }
   confirm_frames_ = static_cast<int>(std::lround(config_.contact_confirm_s * config_.baseline.sample_rate_hz));
   peak_decay_ = static_cast<float>(std::exp(-1.0 / (0.5 * config_.baseline.sample_rate_hz)));
+  if (!(config_.over_range_force_n > 0 && config_.over_range_force_n < 1e6) || config_.over_range_missing < 1) {
+    throw InputError("pipeline: over_range_force_n must be > 0 and over_range_missing >= 1");
+  }
   if (!(config_.quiet_release_pm >= 0 && config_.quiet_release_drop >= 0)) {
     throw InputError("pipeline: quiet_release_pm and quiet_release_drop must be >= 0");
   }
@@ -149,9 +152,34 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
     if (d.invalid_run_ > decoder_.window()) d.primed_ = false;
     return out;
   };
+  // Over range: the frame is not decoded (invalid, counted under its reason, the baseline and the window
+  // untouched) but reported as a contact of at least over_range_force_n. The gate stays open, so the
+  // baseline stays frozen until the decoder sees the release.
+  auto over_range = [&](Reason r) {
+    invalid(r);
+    out.over_range = true;
+    out.in_contact = true;
+    out.force_n = static_cast<float>(config_.over_range_force_n);
+    if (!d.contact_) ++d.counters_.onsets;
+    ++d.counters_.over_range;
+    d.contact_ = true;
+    d.over_range_ = true;
+    d.gate_ = true;
+    return out;
+  };
+  const bool have_baseline = d.tracker_.state() != BaselineTracker::State::kCapturing;
+  const bool loaded = d.contact_ || d.over_range_;
+  int lost = 0;
+  for (double v : wl) lost += std::isfinite(v) ? 0 : 1;
   // Frames that cannot be peaks of this fibre never reach the baseline (they would move it).
   const Reason raw = CheckRaw(wl, flags);
-  if (raw != Reason::kOk) return invalid(raw);
+  if (raw != Reason::kOk) {
+    if (have_baseline && (raw == Reason::kSaturated || raw == Reason::kOutOfBand)) return over_range(raw);
+    if (have_baseline && loaded && (raw == Reason::kTooManyMissing || raw == Reason::kNoSignal)) return over_range(raw);
+    d.over_range_ = false;
+    return invalid(raw);
+  }
+  if (have_baseline && loaded && lost >= config_.over_range_missing) return over_range(Reason::kTooManyMissing);
 
   ShiftsPm shift;
   using Gate = BaselineTracker::Gate;
@@ -163,7 +191,8 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   d.tracker_.Measure(wl, shift);
   out.common_mode_pm = d.tracker_.common_mode_pm();
   // Out of range: refused before it can move the baseline.
-  if (!InRange(shift)) return invalid(Reason::kOutOfRange);
+  if (!InRange(shift)) return over_range(Reason::kOutOfRange);
+  d.over_range_ = false;
   d.tracker_.Advance(wl, shift, gate);
 
   if (!d.primed_) {

@@ -269,7 +269,25 @@ void Monitor::OnFrame(const FrameIn& f, Now now, MessageSink& sink) noexcept {
   last_t_ns_ = f.t_ns;
 
   const decode::PipelineOutput o = pipeline_.Process(f.wavelength_nm, f.flags);
-  if (o.valid) {
+  if (o.over_range) {
+    // More load than the model knows: a contact of at least the stated force, never a light one; reported,
+    // so not a rejection run.
+    reject_run_ = 0;
+    Message& m = scratch_;
+    m.kind = Message::Kind::kContact;
+    Stamp(m, now);
+    Contact& c = m.contact;
+    c = Contact{};
+    c.force_n = Finite(o.force_n);
+    c.over_range = true;
+    c.force_lower_bound_n = c.force_n;
+    c.uncertainty = pipeline_.calibrated_uncertainty();
+    c.onset = !in_contact_;
+    c.common_mode_pm = Finite(o.common_mode_pm);
+    c.missing = o.missing;
+    in_contact_ = true;
+    sink.Push(m);
+  } else if (o.valid) {
     reject_run_ = 0;
     if (o.in_contact || in_contact_) {
       Message& m = scratch_;

@@ -27,6 +27,8 @@ void ToProto(const Message& m, const std::string& patch_id, std::uint64_t seq, v
       p->set_common_mode_pm(c.common_mode_pm);
       p->set_missing_peaks(c.missing);
       p->set_uncertainty_calibrated(c.uncertainty);
+      p->set_over_range(c.over_range);
+      p->set_force_lower_bound_n(c.force_lower_bound_n);
       break;
     }
     case Message::Kind::kHeartbeat: {

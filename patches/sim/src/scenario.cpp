@@ -1,5 +1,9 @@
 #include "ruffini/sim/scenario.h"
 
+#include "ruffini/robot/mount.h"
+#include "ruffini/robot/scene.h"
+#include "ruffini/scene_file.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -37,7 +41,7 @@ Scenario LoadScenario(const std::string& path, const twin::Scene& scene) {
     press.patch = static_cast<std::size_t>(it - scene.patches.begin());
     press.y_mm = p.Number("y_mm", -1e4, 1e4);
     press.r_deg = p.Number("r_deg", -360.0, 360.0);
-    press.force_n = p.Number("force_n", 0.0, 100.0);
+    press.force_n = p.Number("force_n", 0.0, 300.0);
     press.ramp_s = p.NumberOr("ramp_s", 0.0, 0.0, 1e4);
     press.hold_s = p.NumberOr("hold_s", 0.0, 0.0, 1e4);
     press.release_s = p.NumberOr("release_s", 0.0, 0.0, 1e4);
@@ -52,6 +56,69 @@ Scenario LoadScenario(const std::string& path, const twin::Scene& scene) {
   return s;
 }
 
+std::unique_ptr<MountedScene> LoadMounts(const twin::Scene& scene) {
+  if (scene.source.empty()) return nullptr;
+  SceneFile file = LoadSceneFile(scene.source);
+  if (!file.robot) return nullptr;
+  auto m = std::make_unique<MountedScene>();
+  m->robot = robot::LoadRobotScene(file);
+  return m;
+}
+
+namespace {
+double EdgeFraction(double e_mm, double a_mm) {
+  const double s = std::clamp(a_mm > 0 ? e_mm / a_mm : (e_mm >= 0 ? 1.0 : -1.0), -1.0, 1.0);
+  return 0.5 + 0.75 * (s - s * s * s / 3.0);
+}
+}  // namespace
+
+std::vector<PatchLoad> ProbeLoads(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch, double y_mm,
+                                  double r_deg, double contact_radius_mm) {
+  if (mounts == nullptr || patch >= mounts->robot.patches.size()) return {PatchLoad{patch, y_mm, r_deg, 1.0}};
+  const robot::MountedPatch& home = mounts->robot.patches[patch];
+  const Eigen::Vector3d p_L = robot::PatchToLink(home.mount, {y_mm, r_deg}).p_LS_m;
+  std::vector<PatchLoad> loads;
+  double total = 0.0;
+  for (std::size_t i = 0; i < mounts->robot.patches.size() && i < scene.patches.size(); ++i) {
+    const robot::MountedPatch& mp = mounts->robot.patches[i];
+    if (mp.link_index != home.link_index) continue;
+    const auto proj = robot::LinkToPatch(mp.mount, p_L);
+    if (!proj || std::abs(proj->height_mm) > 1.0) continue;
+    const patch::PatchSpec& spec = scene.patches[i].spec;
+    const patch::Geometry g(spec);
+    double r = proj->point.r_deg;
+    // R on the patch's side of the cut (LinkToPatch gives (-90, 270]): pick the value nearest the span.
+    if (r > spec.extent_r_deg + 180.0) r -= 360.0;
+    const double y = proj->point.y_mm;
+    const double e_y = std::min(y, spec.extent_y_mm - y);
+    const double e_r = std::min(g.ArcMm(r), g.ArcMm(spec.extent_r_deg - r));
+    const double f = EdgeFraction(e_y, contact_radius_mm) * EdgeFraction(e_r, contact_radius_mm);
+    if (!(f > 1e-9)) continue;
+    loads.push_back(PatchLoad{i, std::clamp(y, 0.0, spec.extent_y_mm), std::clamp(r, 0.0, spec.extent_r_deg), f});
+    total += f;
+  }
+  for (auto& l : loads) l.share /= total;
+  return loads;
+}
+
+twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch) {
+  twin::TwinEffects e = scene.EffectsOf(patch);  // the patch's own cast, if it names one
+  if (!e.edges || mounts == nullptr || patch >= mounts->robot.patches.size()) return e;
+  // An edge another patch's cover continues beyond (a seam) is `continued`: probe 1 mm outside the middle
+  // of each edge and see whether another patch on the same link and cylinder covers that point.
+  const patch::PatchSpec& spec = scene.patches[patch].spec;
+  const patch::Geometry g(spec);
+  const double out_deg = g.RDeg(1.0), ym = 0.5 * spec.extent_y_mm, rm = 0.5 * spec.extent_r_deg;
+  const patch::SurfacePoint outside[4] = {{-1.0, rm}, {spec.extent_y_mm + 1.0, rm}, {ym, -out_deg},
+                                          {ym, spec.extent_r_deg + out_deg}};
+  for (std::size_t k = 0; k < 4; ++k) {
+    for (const PatchLoad& l : ProbeLoads(scene, mounts, patch, outside[k].y_mm, outside[k].r_deg, 0.0)) {
+      if (l.patch != patch) e.edges->kind[k] = twin::EdgeEffect::Kind::kContinued;
+    }
+  }
+  return e;
+}
+
 ScriptedSource::ScriptedSource(const twin::Scene& scene, Scenario scenario, double rate_hz)
     : scenario_(std::move(scenario)), probe_(scene.probe), rate_hz_(rate_hz) {
   if (scene.patches.empty() || scene.patches.size() > ingest::kChannels) {
@@ -59,12 +126,19 @@ ScriptedSource::ScriptedSource(const twin::Scene& scene, Scenario scenario, doub
                      " patches; a Hyperion frame carries 1..16 channels");
   }
   if (!(rate_hz_ > 0.0)) throw InputError("scripted source: the rate must be above 0");
+  mounts_ = LoadMounts(scene);
   for (std::size_t i = 0; i < scene.patches.size(); ++i) {
-    twins_.push_back(std::make_unique<twin::SkinTwin>(scene.patches[i].spec, scene.effects,
+    twins_.push_back(std::make_unique<twin::SkinTwin>(scene.patches[i].spec, EffectsFor(scene, mounts_.get(), i),
                                                       std::vector<double>{scene.probe.radius_mm}));
     sims_.push_back(std::make_unique<twin::InterrogatorSim>(*twins_.back(), twin::DeriveSeed(scenario_.seed, i)));
   }
-  contacts_.reserve(scenario_.presses.size());
+  contacts_.reserve(scenario_.presses.size() * scene.patches.size());
+  for (const auto& p : scenario_.presses) {
+    const twin::ContactLaw* law = twins_[p.patch]->contact_law(probe_);
+    const double a = law != nullptr ? law->ContactRadiusMm(std::min(p.force_n, law->linear_limit_force_n()))
+                                    : probe_.radius_mm;
+    loads_.push_back(ProbeLoads(scene, mounts_.get(), p.patch, p.y_mm, p.r_deg, a));
+  }
   if (scene.effects.viscoelastic) {
     for (std::size_t i = 0; i < scene.patches.size(); ++i) {
       sites_.emplace_back(&*scene.effects.viscoelastic, 1.0 / rate_hz_, probe_);
@@ -84,27 +158,36 @@ void ScriptedSource::Sample(std::uint64_t sample, std::span<Wavelengths> out) {
     if (!sites_.empty()) {
       // One probe per patch: the latest press that has started drives the filter.
       std::size_t latest = std::numeric_limits<std::size_t>::max();
+      const PatchLoad* load = nullptr;
       for (std::size_t i = 0; i < scenario_.presses.size(); ++i) {
         const auto& p = scenario_.presses[i];
-        if (p.patch == c && p.t_s <= t &&
+        const PatchLoad* on_c = nullptr;
+        for (const auto& l : loads_[i]) {
+          if (l.patch == c) on_c = &l;
+        }
+        if (on_c != nullptr && p.t_s <= t &&
             (latest == std::numeric_limits<std::size_t>::max() || p.t_s >= scenario_.presses[latest].t_s)) {
           latest = i;
+          load = on_c;
         }
       }
       double f = 0.0;
       if (latest != std::numeric_limits<std::size_t>::max()) {
         const auto& p = scenario_.presses[latest];
-        if (latest != current_press_[c]) sites_[c].MoveTo({p.y_mm, p.r_deg});
-        f = p.ForceAt(t);
+        if (latest != current_press_[c]) sites_[c].MoveTo({load->y_mm, load->r_deg});
+        f = load->share * p.ForceAt(t);
       }
       current_press_[c] = latest;
       twins_[c]->StrainShiftsPm(sites_[c].Step(f), s, flags);
     } else {
       contacts_.clear();
-      for (const auto& p : scenario_.presses) {
-        if (p.patch != c) continue;
-        const double f = p.ForceAt(t);
-        if (f > 0.0) contacts_.push_back(twin::Contact{{p.y_mm, p.r_deg}, f, probe_});
+      for (std::size_t i = 0; i < scenario_.presses.size(); ++i) {
+        const auto& p = scenario_.presses[i];
+        for (const auto& l : loads_[i]) {
+          if (l.patch != c) continue;
+          const double f = l.share * p.ForceAt(t);
+          if (f > 0.0) contacts_.push_back(twin::Contact{{l.y_mm, l.r_deg}, f, probe_});
+        }
       }
       twins_[c]->StrainShiftsPm(contacts_, s, flags);
     }

@@ -1,4 +1,6 @@
 #include "ruffini/twin/scene.h"
+
+#include <algorithm>
 #include "ruffini/twin/twin.h"
 #include "ruffini/twin/viscoelastic.h"
 
@@ -108,6 +110,29 @@ TwinEffects ReadEffects(YamlReader& e) {
       out.faults.push_back(fe);
     }
   }
+  if (auto h = e.MapOr("hard_press")) {
+    out.hard_press.microbend_compression =
+        h->NumberOr("microbend_compression", out.hard_press.microbend_compression, 0.31, 0.98);
+    out.hard_press.pinch_margin_mm = h->NumberOr("pinch_margin_mm", out.hard_press.pinch_margin_mm, 0.0, 10.0);
+    h->Finish();
+    out.hard_press_named = true;
+  }
+  if (auto ed = e.MapOr("edges")) {
+    EdgeEffect ee;
+    const char* names[4] = {"y_min", "y_max", "r_min", "r_max"};
+    for (int i = 0; i < 4; ++i) {
+      if (!ed->Has(names[i])) continue;
+      const std::string k = ed->Choice(names[i], {"continued", "free", "bonded"});
+      ee.kind[static_cast<std::size_t>(i)] = k == "continued" ? EdgeEffect::Kind::kContinued
+                                             : k == "free"    ? EdgeEffect::Kind::kFree
+                                                              : EdgeEffect::Kind::kBonded;
+    }
+    ee.free_image_gain = ed->NumberOr("free_image_gain", ee.free_image_gain, 0.0, 1.0);
+    ee.bonded_image_gain = ed->NumberOr("bonded_image_gain", ee.bonded_image_gain, -1.0, 0.0);
+    ee.zone_mm = ed->NumberOr("zone_mm", ee.zone_mm, 1.0, 40.0);
+    ed->Finish();
+    out.edges = ee;
+  }
   if (auto s = e.MapOr("skin_sample")) {
     SkinSampleEffect ss;
     ss.seed = static_cast<std::uint64_t>(s->IntegerOr("seed", static_cast<long>(ss.seed), 0, 1L << 40));
@@ -146,7 +171,8 @@ Scene LoadScene(const std::string& path) {
     s.patches.push_back(ScenePatch{.name = p.name,
                                    .spec_path = p.spec_path,
                                    .spec = patch::LoadPatchSpec(p.spec_path),
-                                   .model_path = p.model_path});
+                                   .model_path = p.model_path,
+                                   .cast_seed = std::nullopt});
   }
   if (auto& t = file.twin) {
     if (auto pr = t->MapOr("probe")) {
@@ -160,9 +186,29 @@ Scene LoadScene(const std::string& path) {
       lc->Finish();
     }
     if (auto e = t->MapOr("effects")) s.effects = ReadEffects(*e);
+    if (t->Has("casts")) {
+      // casts: [{patch: forearm_b, skin_sample: 3}, ...]: each patch its own cast of the design.
+      for (YamlReader& c : t->Sequence("casts")) {
+        const std::string name = c.String("patch");
+        auto it = std::find_if(s.patches.begin(), s.patches.end(), [&](const ScenePatch& p) { return p.name == name; });
+        if (it == s.patches.end()) c.Fail("patch", "is not a patch of this scene");
+        if (it->cast_seed) c.Fail("patch", "has a cast already");
+        it->cast_seed = static_cast<std::uint64_t>(c.Integer("skin_sample", 0, 1L << 40));
+        c.Finish();
+      }
+    }
     t->Finish();
   }
   return s;
+}
+
+TwinEffects Scene::EffectsOf(std::size_t patch) const {
+  TwinEffects e = effects;
+  if (patch < patches.size() && patches[patch].cast_seed) {
+    if (!e.skin_sample) e.skin_sample = SkinSampleEffect{};
+    e.skin_sample->seed = *patches[patch].cast_seed;
+  }
+  return e;
 }
 
 void OverrideSkinSample(Scene& scene, std::uint64_t seed) {

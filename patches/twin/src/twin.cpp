@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <tuple>
@@ -149,7 +150,34 @@ SkinTwin::SkinTwin(const patch::PatchSpec& spec, const TwinEffects& effects, std
   tables_ = CachedTables(layer, spec.gratings[0].length_mm);
   for (double r : sphere_radii) {
     law_radii_mm_.push_back(r);
-    laws_.emplace_back(thickness_mm_, spec.layer.material.youngs_modulus_kpa, spec.layer.material.poisson_ratio, r);
+    const auto& m = spec.layer.material;
+    laws_.emplace_back(thickness_mm_, m.youngs_modulus_kpa, m.poisson_ratio, r,
+                       Yeoh{m.yeoh_c1_kpa * 1e3, m.yeoh_c2_pa, m.yeoh_c3_pa});
+  }
+  // The fibre path at the fibre's depth (unrolled), its cumulative length, and where each grating sits on it
+  // (the light enters at the path's first point): a pinch at path length s darkens the gratings beyond s.
+  for (const auto& p : spec.fibre.path) {
+    path_y_mm_.push_back(p.y_mm);
+    path_arc_mm_.push_back(depth_radius_mm_ * p.r_deg * patch::kDegToRad);
+  }
+  path_s_mm_.assign(path_y_mm_.size(), 0.0);
+  for (std::size_t k = 1; k < path_y_mm_.size(); ++k) {
+    path_s_mm_[k] = path_s_mm_[k - 1] + std::hypot(path_y_mm_[k] - path_y_mm_[k - 1], path_arc_mm_[k] - path_arc_mm_[k - 1]);
+  }
+  for (std::size_t i = 0; i < patch::kGratings; ++i) {
+    const double gy = spec.gratings[i].centre.y_mm, ga = depth_radius_mm_ * spec.gratings[i].centre.r_deg * patch::kDegToRad;
+    double best = std::numeric_limits<double>::infinity();
+    grating_s_mm_[i] = 0.0;
+    for (std::size_t k = 1; k < path_y_mm_.size(); ++k) {
+      const double dy = path_y_mm_[k] - path_y_mm_[k - 1], da = path_arc_mm_[k] - path_arc_mm_[k - 1];
+      const double len2 = dy * dy + da * da;
+      const double t = len2 > 0 ? std::clamp(((gy - path_y_mm_[k - 1]) * dy + (ga - path_arc_mm_[k - 1]) * da) / len2, 0.0, 1.0) : 0.0;
+      const double d = std::hypot(path_y_mm_[k - 1] + t * dy - gy, path_arc_mm_[k - 1] + t * da - ga);
+      if (d < best) {
+        best = d;
+        grating_s_mm_[i] = path_s_mm_[k - 1] + t * std::sqrt(len2);
+      }
+    }
   }
   // Point-like probes saturate where the paper's 11 mm sphere does (a conservative, documented choice).
   point_force_limit_n_ = ContactLaw(thickness_mm_, spec.layer.material.youngs_modulus_kpa,
@@ -197,8 +225,75 @@ double SkinTwin::StiffeningFactor(double depth_mm) const noexcept {
   return mu > 0 ? c1 / mu : 1.0;
 }
 
+void SkinTwin::Pinch(const patch::SurfacePoint& at, double contact_radius_mm, double& pinched_from_s_mm) const noexcept {
+  const double cy = at.y_mm, ca = depth_radius_mm_ * at.r_deg * patch::kDegToRad;
+  const double reach = contact_radius_mm + effects_.hard_press.pinch_margin_mm;
+  for (std::size_t k = 1; k < path_y_mm_.size(); ++k) {
+    const double y0 = path_y_mm_[k - 1], a0 = path_arc_mm_[k - 1];
+    const double dy = path_y_mm_[k] - y0, da = path_arc_mm_[k] - a0;
+    const double len = std::hypot(dy, da);
+    if (!(len > 0)) continue;
+    const double t = std::clamp(((cy - y0) * dy + (ca - a0) * da) / (len * len), 0.0, 1.0);
+    const double d = std::hypot(y0 + t * dy - cy, a0 + t * da - ca);
+    if (d > reach) continue;
+    // The first point of this segment within reach of the contact: the pinch starts there.
+    const double half_chord = std::sqrt(std::max(0.0, reach * reach - d * d));
+    const double s = path_s_mm_[k - 1] + std::max(0.0, t * len - half_chord);
+    pinched_from_s_mm = std::min(pinched_from_s_mm, s);
+    return;  // segments come in order along the light's way: the first one in reach is the pinch
+  }
+}
+
+namespace {
+// The share of a Hertz footprint of radius a on the cover side of a straight edge the centre lies e inside
+// of (e < 0: outside): its parabolic line load integrated, 1/2 + 3/4 (s - s^3/3), s = e / a in [-1, 1].
+double FootprintFraction(double e_mm, double a_mm) noexcept {
+  if (!(a_mm > 0.0)) return e_mm >= 0.0 ? 1.0 : 0.0;
+  const double s = e_mm / a_mm;
+  if (s >= 1.0) return 1.0;
+  if (s <= -1.0) return 0.0;
+  return 0.5 + 0.75 * (s - s * s * s / 3.0);
+}
+}  // namespace
+
+double SkinTwin::CoverFraction(const patch::SurfacePoint& at, double contact_radius_mm) const noexcept {
+  const EdgeEffect& e = *effects_.edges;
+  const double dist[4] = {at.y_mm, spec_.extent_y_mm - at.y_mm, geometry_.ArcMm(at.r_deg),
+                          geometry_.ArcMm(spec_.extent_r_deg - at.r_deg)};
+  double f = 1.0;
+  for (std::size_t k = 0; k < 4; ++k) {
+    if (e.kind[k] == EdgeEffect::Kind::kFree) f *= FootprintFraction(dist[k], contact_radius_mm);
+  }
+  return std::max(f, 0.25);  // a contact on a corner: at least a quarter of the footprint bears
+}
+
+std::size_t SkinTwin::Sources(const patch::SurfacePoint& at, std::array<Source, 4>& out) const noexcept {
+  out[0] = Source{at.y_mm, at.r_deg, 1.0};
+  if (!effects_.edges) return 1;
+  const EdgeEffect& e = *effects_.edges;
+  auto gain = [&](std::size_t k, double dist_mm) {
+    if (e.kind[k] == EdgeEffect::Kind::kContinued || !(dist_mm < e.zone_mm)) return 0.0;
+    const double g = e.kind[k] == EdgeEffect::Kind::kFree ? e.free_image_gain : e.bonded_image_gain;
+    const double half = 0.5 * e.zone_mm;
+    return dist_mm <= half ? g : g * (e.zone_mm - dist_mm) / half;
+  };
+  // The nearer Y edge and the nearer R edge (a patch is far wider than two zones).
+  const bool y_low = at.y_mm <= 0.5 * spec_.extent_y_mm, r_low = at.r_deg <= 0.5 * spec_.extent_r_deg;
+  const double dy = y_low ? at.y_mm : spec_.extent_y_mm - at.y_mm;
+  const double dr = r_low ? geometry_.ArcMm(at.r_deg) : geometry_.ArcMm(spec_.extent_r_deg - at.r_deg);
+  const double gy = gain(y_low ? 0 : 1, dy), gr = gain(r_low ? 2 : 3, dr);
+  const double y_img = y_low ? -at.y_mm : 2.0 * spec_.extent_y_mm - at.y_mm;
+  const double r_img = r_low ? -at.r_deg : 2.0 * spec_.extent_r_deg - at.r_deg;
+  std::size_t n = 1;
+  if (gy != 0.0) out[n++] = Source{y_img, at.r_deg, gy};
+  if (gr != 0.0) out[n++] = Source{at.y_mm, r_img, gr};
+  if (gy != 0.0 && gr != 0.0) out[n++] = Source{y_img, r_img, gy * gr};  // the corner's image of the images
+  return n;
+}
+
 void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, std::uint32_t& flags) const noexcept {
   out.fill(0.0);
+  double pinched = std::numeric_limits<double>::infinity();  // path length from which the fibre is dark
   const patch::Region extent = spec_.Extent();
   for (const Contact& c : contacts) {
     if (!std::isfinite(c.force_n) || c.force_n < 0.0 || !std::isfinite(c.at.y_mm) || !std::isfinite(c.at.r_deg) ||
@@ -220,29 +315,52 @@ void SkinTwin::StrainShiftsPm(std::span<const Contact> contacts, Shifts& out, st
         flags |= kFlagBadContact;
         continue;
       }
-      if (force > law->linear_limit_force_n()) {
-        force = law->linear_limit_force_n();
-        flags |= kFlagSaturated;
-      }
-      depth = law->DepthMm(force);
+      // Beyond the linear range the cover stiffens until it bottoms out (ContactLaw::HardForceN); the strain
+      // field is the linear layer's at the same depth. Flagged: the frame is beyond the linear range.
+      if (force > law->linear_limit_force_n()) flags |= kFlagSaturated;
+      // At a free edge the part of the footprint still on the cover carries the whole force: it is indented
+      // as deep as the whole footprint would be by force / fraction (only the hard range sees a difference).
+      const double on_cover = effects_.edges ? CoverFraction(c.at, law->ContactRadiusMm(std::min(force, law->linear_limit_force_n())))
+                                             : 1.0;
+      depth = law->HardDepthMm(force / on_cover);
       radius = std::min(c.probe.radius_mm, std::sqrt(c.probe.radius_mm * depth));
+      const double d_lin = ContactLaw::kLinearCompressionLimit * law->thickness_mm();
+      force = law->StrainForceN(force / on_cover) * on_cover *
+              (effects_.stiffening ? StiffeningFactor(std::min(depth, d_lin)) : 1.0);
+      if (depth > effects_.hard_press.microbend_compression * thickness_mm_) Pinch(c.at, radius, pinched);
     } else if (force > point_force_limit_n_) {
       force = point_force_limit_n_;
       flags |= kFlagSaturated;
     }
-    const double f = force * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
-    const double cr = c.at.r_deg * patch::kDegToRad;
+    const double f = c.probe.shape == Probe::Shape::kSphere ? force
+                                                            : force * (effects_.stiffening ? StiffeningFactor(depth) : 1.0);
+    // The contact and, near a free or bonded edge, its images across the edges (at most 4 sources).
+    std::array<Source, 4> sources{};
+    const std::size_t n_sources = Sources(c.at, sources);
     for (std::size_t i = 0; i < patch::kGratings; ++i) {
       double acc = 0.0;
-      for (const LobeGeo& l : lobes_[i]) {
-        const double dy = l.y_mm - c.at.y_mm;
-        const double darc = depth_radius_mm_ * (l.r_rad - cr);
-        const double u = dy * l.cos_d + darc * l.sin_d;
-        const double v = -dy * l.sin_d + darc * l.cos_d;
-        acc += l.scale * tables_->Lookup(radius, u, v);
+      for (std::size_t k = 0; k < n_sources; ++k) {
+        const Source& src = sources[k];
+        const double cr = src.r_deg * patch::kDegToRad;
+        for (const LobeGeo& l : lobes_[i]) {
+          const double dy = l.y_mm - src.y_mm;
+          const double darc = depth_radius_mm_ * (l.r_rad - cr);
+          const double u = dy * l.cos_d + darc * l.sin_d;
+          const double v = -dy * l.sin_d + darc * l.cos_d;
+          acc += src.weight * l.scale * tables_->Lookup(radius, u, v);
+        }
       }
       out[i] += f * acc;
     }
+  }
+  if (pinched < std::numeric_limits<double>::infinity()) {
+    // Microbending at the pinch: every grating from there on along the fibre is dark (its peak is lost); a
+    // grating reaching into the pinch (half its length) is split by the transverse load.
+    const double half = spec_.gratings[0].length_mm / 2.0;
+    for (std::size_t i = 0; i < patch::kGratings; ++i) {
+      if (grating_s_mm_[i] + half >= pinched) out[i] = std::numeric_limits<double>::quiet_NaN();
+    }
+    flags |= kFlagPeakMissing;
   }
 }
 
@@ -304,6 +422,7 @@ void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, 
                            std::uint32_t& flags) noexcept {
   const double dt_c = TemperatureC(t_s);
   const double band_pm = twin_.spec().fibre.band_half_width_nm * 1e3;
+  const double window_min_nm = twin_.spec().interrogator.window_min_nm, window_max_nm = twin_.spec().interrogator.window_max_nm;
   const auto& ref = twin_.reference_wavelength_nm();
   const auto& tc = twin_.temperature_pm_per_c();
   for (std::size_t i = 0; i < patch::kGratings; ++i) {
@@ -316,11 +435,17 @@ void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, 
       flags |= kFlagPeakMissing;
       continue;
     }
-    if (!(std::abs(shift) <= band_pm)) {  // the interrogator cannot follow a peak out of its band
-      shift = std::clamp(shift, -band_pm, band_pm);
-      flags |= kFlagSaturated;
+    // A raw peak stream reports a peak where it is: one that has left its band is sent at its wavelength
+    // (flagged in the twin's frame flags, which no interrogator stream carries); beyond the instrument's
+    // window it is not seen at all (lost).
+    if (!(std::abs(shift) <= band_pm)) flags |= kFlagSaturated;
+    const double nm = ref[i] + shift * 1e-3;
+    if (!(nm >= window_min_nm && nm <= window_max_nm)) {
+      wl[i] = std::numeric_limits<double>::quiet_NaN();
+      flags |= kFlagPeakMissing;
+      continue;
     }
-    wl[i] = ref[i] + shift * 1e-3;
+    wl[i] = nm;
   }
 }
 
@@ -335,6 +460,8 @@ std::string TwinEffects::Summary() const {
   if (viscoelastic) add("viscoelastic");
   if (!faults.empty()) add("faults");
   if (skin_sample) add("skin_sample=" + std::to_string(skin_sample->seed));
+  if (hard_press_named) add("hard_press");
+  if (edges) add("edges");
   return s.empty() ? "none" : s;
 }
 

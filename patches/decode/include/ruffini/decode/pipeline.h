@@ -12,7 +12,14 @@
 //     -> calibrated uncertainty (force sd, 2x2 position covariance on the surface)
 //
 // A frame that fails a check is invalid with one Reason and carries no force (0, never NaN); it is not fed
-// to the networks' window, so it cannot poison later frames. Reasons are counted; the decoder service turns
+// to the networks' window, so it cannot poison later frames. Except one kind, "never a hard press read as
+// light": a frame that shows more load than the model knows is invalid (not decoded) AND over range: reported
+// as a contact whose force is at least over_range_force_n (force_n = that bound, over_range = true, not
+// located). The evidence, once the baseline exists: the source's saturated flag; a peak outside its band;
+// a shift beyond the model's calibrated range (InputRange, else the z limit); or, while a contact is open,
+// over_range_missing or more peaks lost at once (a pinched fibre darkens the gratings beyond the pinch),
+// too many missing or no signal at all. A Hyperion stream carries no saturation flag: the lost, out-of-band
+// and out-of-range peaks are the evidence. Reasons are counted; the decoder service turns
 // persistent ones into faults. Model (immutable) and Data (per stream) are separate, as in NetworkDecoder.
 #include <array>
 #include <cstdint>
@@ -56,6 +63,13 @@ struct PipelineConfig {
   // a grating by much keeps being decided by the nets.
   double quiet_release_drop = 4.0;
   bool freeze_on_gate = true;  // the decoder's gate drives the baseline's freeze (false: the shifts do, as before v1.1)
+  // The force an over-range frame is reported at ("at least"): the largest force the shipped models are
+  // trained on (the paper protocol's 2.5 N indentations, FACTS.md). A region threshold above it would not
+  // stop on an over-range contact: keep thresholds at or below it (docs/twin.md, "Hard presses").
+  double over_range_force_n = 2.5;
+  // Peaks lost at once, while a contact is open, that make a frame over range (a single lost peak is a
+  // dimmed grating's dropout and is decoded from the others, as before).
+  int over_range_missing = 2;
 };
 
 struct PipelineOutput {
@@ -70,6 +84,9 @@ struct PipelineOutput {
   bool valid = false;
   bool in_contact = false;      // the force gate is open
   bool located = false;
+  // Over range: the frame shows more load than the model knows (valid is false, reason says which evidence);
+  // reported as a contact of at least force_n = over_range_force_n, in_contact true, not located.
+  bool over_range = false;
   Reason reason = Reason::kCapturing;
   std::uint8_t missing = 0;
 };
@@ -77,6 +94,7 @@ struct PipelineOutput {
 // Plain counters a service copies into its metrics off the real-time thread.
 struct PipelineCounters {
   std::uint64_t frames = 0, valid = 0, located = 0, onsets = 0;
+  std::uint64_t over_range = 0;  // frames reported over range (also counted in invalid[reason])
   std::array<std::uint64_t, kReasonCount> invalid{};  // indexed by Reason (kOk stays 0)
 };
 
@@ -103,6 +121,7 @@ class Pipeline {
     int open_run_ = 0;      // consecutive valid frames with the force gate open
     bool gate_ = false;     // the decoder's force gate (drives the baseline)
     bool contact_ = false;  // the reported contact (the gate, confirmed)
+    bool over_range_ = false;  // the last frame was over range
     float recent_peak_pm_ = 0.0f;  // largest |shift| lately, decaying (quiet release after a drop)
   };
 

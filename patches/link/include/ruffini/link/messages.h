@@ -73,6 +73,8 @@ struct Contact {
   bool released = false;
   float common_mode_pm = 0.0f;
   std::uint8_t missing = 0;
+  bool over_range = false;          // more load than the model knows: force_n is a lower bound
+  float force_lower_bound_n = 0.0f;  // with over_range
 };
 
 struct Fault {

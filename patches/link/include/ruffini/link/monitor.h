@@ -7,7 +7,9 @@
 // What is sent (the rules of docs/contracts.md):
 // - Contact: every valid frame while the pipeline reports a contact, the first one flagged onset, plus the
 //   first valid frame after it, flagged released. Invalid frames send nothing (they are counted); a contact
-//   is never ended by an invalid frame, and one that persists becomes a fault.
+//   is never ended by an invalid frame, and one that persists becomes a fault. An over-range frame (the
+//   pipeline's over_range: more load than the model knows) is sent as a contact flagged over_range with
+//   force_n = its lower bound (onset if no contact was open) and is not a rejection.
 // - Heartbeat: every heartbeat period of the steady clock, whatever else happens (also while silent), with
 //   the health: healthy only when connected, frames arriving, the baseline tracking or frozen, and no fault.
 // - Fault: when a fault begins, or a different one takes over. Faults in priority order:

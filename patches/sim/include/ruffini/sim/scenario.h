@@ -7,18 +7,31 @@
 //   seed: 1                 # optional: interrogator noise seed
 //   presses:
 //     - {t_s: 0.5, patch: forearm, y_mm: 10, r_deg: 0, force_n: 1.5, ramp_s: 0.2, hold_s: 0.5, release_s: 0.2}
+//
+// One probe, any point of the limb: (y_mm, r_deg) are coordinates on the named patch's cylinder and may lie
+// outside it (across a seam, on bare limb). In a scene with a robot (mounts), the probe loads every patch on
+// the same link whose cover lies under its footprint, sharing the force by contact mechanics (ProbeLoads).
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "ruffini/robot/scene.h"
 #include "ruffini/sim/source.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
 #include "ruffini/twin/viscoelastic.h"
 
 namespace ruffini::sim {
+
+// One patch's share of a probe: where it acts on that patch (clamped into the patch: the share acts at the
+// cover's edge nearest the probe) and the fraction of the probe's force it carries.
+struct PatchLoad {
+  std::size_t patch = 0;
+  double y_mm = 0.0, r_deg = 0.0;
+  double share = 1.0;
+};
 
 struct Press {
   double t_s = 0.0;          // start of the ramp
@@ -39,6 +52,28 @@ struct Scenario {
   std::vector<Press> presses;
 };
 
+// Where one probe at (y_mm, r_deg) on patch `patch`'s cylinder presses the scene's patches. The contact law's
+// footprint (radius a, from the held force on a continuous cover) is a Hertz pressure p0 sqrt(1 - r^2/a^2);
+// its line load across a straight cover edge is parabolic, so the part of it at signed distance > -e of the
+// edge (e > 0: the centre on the cover) carries f(e/a) = 1/2 + 3/4 (s - s^3/3), s = clamp(e/a, -1, 1).
+// Each patch's fraction is f over its Y and its arc edges (a product, for a corner); the fractions are
+// normalised over the patches the footprint touches (bare limb lies a cover's thickness lower and takes
+// nothing before the probe bottoms out). Without mounts (robot == nullptr) only the named patch, unclipped.
+// Patches on other links than the named patch's, or on another cylinder (radii differ by > 1 mm), are not
+// touched.
+struct MountedScene {
+  robot::RobotScene robot;
+};
+std::vector<PatchLoad> ProbeLoads(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch, double y_mm,
+                                  double r_deg, double contact_radius_mm);
+
+// The twin effects of patch `patch`: the scene's with the patch's own cast (Scene::EffectsOf), and every edge another patch's cover continues beyond (a
+// seam, found through the mounts) made `continued` when the scene names `edges`.
+twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch);
+
+// The scene's mounts, when it has a robot section (nullptr otherwise).
+std::unique_ptr<MountedScene> LoadMounts(const twin::Scene& scene);
+
 // Loads and validates against the scene (patch names). Throws InputError with file:line:col and the key.
 Scenario LoadScenario(const std::string& path, const twin::Scene& scene);
 
@@ -52,6 +87,10 @@ class ScriptedSource final : public FrameSource {
   // Throws InputError for more than 16 patches or a probe the twin cannot model.
   ScriptedSource(const twin::Scene& scene, Scenario scenario, double rate_hz);
   ~ScriptedSource() override;
+  [[nodiscard]] const Scenario& scenario() const noexcept { return scenario_; }
+  [[nodiscard]] const twin::SkinTwin& twin(std::size_t patch) const { return *twins_.at(patch); }
+  // The patches press i loads (ProbeLoads; the shares sum to 1, or none on bare limb).
+  [[nodiscard]] const std::vector<PatchLoad>& loads(std::size_t press) const { return loads_.at(press); }
   [[nodiscard]] std::size_t channels() const noexcept override { return twins_.size(); }
   void Sample(std::uint64_t sample, std::span<Wavelengths> out) override;
 
@@ -64,6 +103,8 @@ class ScriptedSource final : public FrameSource {
   std::vector<twin::ViscoelasticSites> sites_;     // one per patch when the scene is viscoelastic
   std::vector<std::size_t> current_press_;         // per patch: index of the press the probe is at (or npos)
   std::vector<twin::Contact> contacts_;
+  std::unique_ptr<MountedScene> mounts_;
+  std::vector<std::vector<PatchLoad>> loads_;     // per press
 };
 
 }  // namespace ruffini::sim

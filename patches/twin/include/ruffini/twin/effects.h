@@ -1,5 +1,6 @@
 #pragma once
 // The effects a scene may ask the twin to model. Each is optional: absent means not built, not simulated.
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -106,6 +107,35 @@ struct SkinSampleEffect {
   double wavelength_nm = 0.05;
 };
 
+// Hard presses (always modelled; a scene's `hard_press:` only changes the parameters). Beyond the layer's
+// linear range the contact law stiffens until the cover bottoms out (ContactLaw::HardForceN). Once the cover
+// under a sphere is compressed beyond microbend_compression (depth / thickness), the fibre where it passes
+// under the probe (within the contact radius + pinch_margin_mm of its centre, at the fibre's depth) is pinched
+// against the limb: microbending loss there, in both directions of the reflected light, darkens every grating
+// from that point on along the fibre, and a grating under the probe is split by the transverse load (its
+// peak is lost). See docs/twin.md, "Hard presses".
+struct HardPressParams {
+  double microbend_compression = 0.6;
+  double pinch_margin_mm = 1.0;
+};
+
+// The cover ends at the patch's edges (docs/twin.md, "Edges"). Each edge (Y = 0, Y = extent, R = 0,
+// R = extent) is `continued` (the layer goes on: a seam with a neighbouring cover; the old behaviour),
+// `free` (the cover ends: traction-free face) or `bonded` (the cover's end face is glued to a rigid rim).
+// Within zone_mm of a free or bonded edge a contact gets an image mirrored across the edge (Hetenyi's
+// method for the elastic quarter-space, its first term) of gain free_image_gain (a traction-free face) or
+// bonded_image_gain (a clamped face), tapered linearly to 0 from zone_mm / 2 to zone_mm; and at a free edge
+// the part of the probe's footprint still on the cover carries the whole force (it is indented as deep as
+// the whole footprint would be by F / fraction). Contacts farther than zone_mm from every such edge are
+// computed exactly as without edges.
+struct EdgeEffect {
+  enum class Kind { kContinued, kFree, kBonded };
+  std::array<Kind, 4> kind{Kind::kFree, Kind::kFree, Kind::kFree, Kind::kFree};  // y_min, y_max, r_min, r_max
+  double free_image_gain = 1.0;
+  double bonded_image_gain = -1.0;
+  double zone_mm = 12.0;
+};
+
 struct TwinEffects {
   std::optional<NoiseEffect> noise;
   std::optional<GainSpreadEffect> gain_spread;
@@ -115,6 +145,9 @@ struct TwinEffects {
   std::optional<ViscoelasticEffect> viscoelastic;
   std::vector<FaultEffect> faults;
   std::optional<SkinSampleEffect> skin_sample;
+  HardPressParams hard_press;  // always on (defaults); not in Summary() unless named
+  std::optional<EdgeEffect> edges;
+  bool hard_press_named = false;
 
   // The seed for everything fabrication draws (gains, temperature spread, positions).
   [[nodiscard]] std::uint64_t fabrication_seed() const { return skin_sample ? skin_sample->seed : 0; }

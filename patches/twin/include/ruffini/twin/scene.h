@@ -3,6 +3,7 @@
 // is the root reader's (ruffini/scene_file.h); a scene's `robot`, `mount`, `region` and `safety` keys are
 // read by ruffini::robot (robot/scene.h) and ruffini::safety (safety/scene.h): the twin builds nothing from
 // them. Only what a scene names is built.
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -20,6 +21,9 @@ struct ScenePatch {
   // The decoder model the patch's decoder service runs (`model:`, relative to the scene file; optional:
   // empty when the scene names none). The twin never reads it.
   std::string model_path;
+  // This patch's own cast (skin sample), from the twin section's `casts:`; nullopt: the scene's
+  // effects.skin_sample (every patch the same cast).
+  std::optional<std::uint64_t> cast_seed;
 };
 
 // The indentation rig's force sensor (the paper's ATI Nano-43: 1/256 N resolution).
@@ -38,6 +42,9 @@ struct Scene {
 
   // The one patch a single-patch command works on: the named one, or the only one. Throws InputError.
   [[nodiscard]] const ScenePatch& Patch(const std::string& patch_name = "") const;
+  // The twin effects of patch i: the scene's, with the patch's own cast (cast_seed) as its skin sample (the
+  // scene's skin_sample parameters, or the defaults when the scene names none).
+  [[nodiscard]] TwinEffects EffectsOf(std::size_t patch) const;
 };
 
 // Loads and validates; patch spec paths are relative to the scene file. Throws InputError with

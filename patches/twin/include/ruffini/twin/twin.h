@@ -54,9 +54,12 @@ class SkinTwin {
 
   // Noise-free strain shifts (pm) of the 16 gratings for a set of simultaneous contacts; contributions
   // superpose. A contact outside the patch contributes nothing and sets kFlagOffPatch; a non-finite or
-  // negative force contributes nothing and sets kFlagBadContact. A force beyond the layer's linear range
-  // (indentation > 30 % of the thickness: about 4 N for the 11 mm sphere) saturates the response at that
-  // force and sets kFlagSaturated. InterrogatorSim further clips each peak to its band.
+  // negative force contributes nothing and sets kFlagBadContact. A sphere's force beyond the layer's linear
+  // range (indentation > 30 % of the thickness: about 4 N for the 11 mm sphere) sets kFlagSaturated and
+  // follows the hard-press law (the cover stiffens until it bottoms out; ContactLaw::HardForceN); a press
+  // compressing the cover beyond hard_press.microbend_compression pinches the fibre: the gratings from the
+  // pinch on along the fibre come out NaN (kFlagPeakMissing). A point-like probe saturates at the 11 mm
+  // sphere's linear limit (flagged). InterrogatorSim reports out-of-band peaks where they are (flagged).
   // Real-time safe: no allocation, no lock, no throw.
   void StrainShiftsPm(std::span<const Contact> contacts, Shifts& shift_pm, std::uint32_t& flags) const noexcept;
   [[nodiscard]] Shifts StrainShiftsPm(const Contact& c) const noexcept;
@@ -87,6 +90,15 @@ class SkinTwin {
     double scale;            // gain * transfer * pm/strain
   };
   [[nodiscard]] double StiffeningFactor(double depth_mm) const noexcept;
+  struct Source {
+    double y_mm = 0.0, r_deg = 0.0, weight = 0.0;
+  };
+  // The contact and its edge images (effects.edges); returns how many of out are set.
+  std::size_t Sources(const patch::SurfacePoint& at, std::array<Source, 4>& out) const noexcept;
+  // The share of the footprint on the cover (free edges only), at least 1/4.
+  [[nodiscard]] double CoverFraction(const patch::SurfacePoint& at, double contact_radius_mm) const noexcept;
+  // Lowers pinched_from_s_mm to the fibre path length where a hard press at `at` pinches the fibre, if it does.
+  void Pinch(const patch::SurfacePoint& at, double contact_radius_mm, double& pinched_from_s_mm) const noexcept;
 
   patch::PatchSpec spec_;
   TwinEffects effects_;
@@ -100,6 +112,8 @@ class SkinTwin {
   std::vector<double> law_radii_mm_;
   std::vector<ContactLaw> laws_;                // one per sphere radius
   double point_force_limit_n_ = 0.0;            // saturation force for point-like probes
+  std::vector<double> path_y_mm_, path_arc_mm_, path_s_mm_;  // fibre path at the fibre's depth, unrolled
+  std::array<double, patch::kGratings> grating_s_mm_{};       // each grating's centre along the path
 };
 
 // Per-stream interrogator state (holds a reference: the SkinTwin must outlive it and not be moved): turns strain shifts into the peak wavelengths an interrogator reports
