@@ -11,7 +11,7 @@ namespace ruffini::channel {
 namespace {
 
 // The same numbers as crc_oracle.py's EXPECTED.
-constexpr std::uint32_t kContactCrc = 0x634D0F94;
+constexpr std::uint32_t kContactCrc = 0x526D0CEE;
 constexpr std::uint32_t kHeartbeatCrc = 0x0A8F8F41;
 constexpr std::uint32_t kStateCrc = 0x2A93C49F;
 
@@ -40,6 +40,8 @@ v1::PatchMessage ContactMessage() {
   c.set_common_mode_pm(-1.5f);
   c.set_missing_peaks(0);
   c.set_uncertainty_calibrated(true);
+  c.set_over_range(true);
+  c.set_force_lower_bound_n(2.5f);
   return m;
 }
 
@@ -143,6 +145,8 @@ TEST(SafetyCrc, EverySafetyFieldOfAContactIsCovered) {
       [](v1::PatchMessage& m) { m.mutable_contact()->set_common_mode_pm(0.0f); },
       [](v1::PatchMessage& m) { m.mutable_contact()->set_missing_peaks(1); },
       [](v1::PatchMessage& m) { m.mutable_contact()->set_uncertainty_calibrated(false); },
+      [](v1::PatchMessage& m) { m.mutable_contact()->set_over_range(false); },
+      [](v1::PatchMessage& m) { m.mutable_contact()->set_force_lower_bound_n(5.0f); },
       [](v1::PatchMessage& m) { m.mutable_heartbeat()->set_healthy(true); },  // another body
   };
   for (std::size_t i = 0; i < std::size(mutations); ++i) {

@@ -78,6 +78,8 @@ void Contact(Canonical& c, const v1::PatchContact& k) noexcept {
   c.F32(k.common_mode_pm());
   c.U32(k.missing_peaks());
   c.Bool(k.uncertainty_calibrated());
+  c.Bool(k.over_range());
+  c.F32(k.force_lower_bound_n());
 }
 
 void Beat(Canonical& c, const v1::Heartbeat& h) noexcept {
