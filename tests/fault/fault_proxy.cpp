@@ -21,7 +21,7 @@
 // --every K the alteration repeats every K messages after N (for the error-rate rule). Only the first stream
 // of the link (--streams 0: every stream) is altered. Other calls (GetStatus, ResetStop, PublishJointStates,
 // WatchContacts) are forwarded unchanged. The chosen port goes to --ports-file ("grpc P"); each alteration
-// made is printed on stdout ("altered <error> at <n>"), so a test can wait for it.
+// made is printed on stdout ("altered <error> at <n> t_ns <Unix ns>"), so a test can wait for it.
 //
 // A test tool (tests/fault), never deployed. Synchronous gRPC: a thread per call is fine at test scale.
 #include <grpcpp/grpcpp.h>
@@ -61,7 +61,10 @@ bool Hits(const Options& o, int n) {
 }
 
 void Say(const std::string& what, int n) {
-  std::printf("altered %s at %d\n", what.c_str(), n);
+  const auto unix_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                           std::chrono::system_clock::now().time_since_epoch())
+                           .count();
+  std::printf("altered %s at %d t_ns %lld\n", what.c_str(), n, static_cast<long long>(unix_ns));
   std::fflush(stdout);
 }
 

@@ -445,7 +445,9 @@ Step Policy::OnDisconnect(Data& d, std::string_view patch_id, std::int64_t now_n
   const std::int32_t i = FindPatch(patch_id);
   if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, Cause{.kind = CauseKind::kInternal}, Severity::kFault);
   PatchState& p = d.patches_[static_cast<std::size_t>(i)];
-  const bool is_new = Live(p.link);  // a silent link ending, or a second disconnect, is the same cause
+  // A silent link ending, a second disconnect, or the end of a stream the aggregator ended for a protocol or
+  // link-layer fault, is the same cause (the patch stays a present cause until a new hello is accepted).
+  const bool is_new = Live(p.link) && !p.protocol_fault;
   if (p.link != LinkState::kRefused) p.link = LinkState::kDisconnected;
   p.healthy_since_t_ns.reset();
   Latch(d, Cause{.kind = CauseKind::kPatchSilent, .patch = i, .t_ns = now_ns}, Severity::kFault, is_new);
