@@ -142,8 +142,9 @@ SafetyMonitor::Action SafetyMonitor::OnStreamOpened(SteadyClock::time_point now)
   last_evidence_ = now;
   clear_streak_ = 0;
   ++stats_.streams_opened;
-  link_.reset();  // a new stream learns its sender anew (run id, sequence, clock offset)
-  link_latched_ = false;
+  // A new stream learns its sender's clock offset anew; the error-rate latch and the run's newest seq are
+  // kept (a re-created stream must not forget errors, nor accept a replay of older states of the same run).
+  link_.reset();
   return {};
 }
 
@@ -151,10 +152,30 @@ SafetyMonitor::Action SafetyMonitor::OnStreamOpened(SteadyClock::time_point now)
 // freshness; docs/safety-channel.md), then nothing else. A discarded state halts.
 StateVerdict SafetyMonitor::CheckState(const v1::SafetyState& s, SteadyClock::time_point arrival) {
   if (!link_) link_.emplace(config_.link, config_.robot_name);
-  const channel::Verdict v = link_->Receive(
-      s, std::chrono::duration_cast<std::chrono::nanoseconds>(arrival.time_since_epoch()).count());
-  if (v.error) stats_.link_errors.Count(v.kind);
-  if (v.rate_latch) link_latched_ = true;
+  if (!rate_) rate_.emplace(config_.link.error_rate);
+  const std::int64_t arrival_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(arrival.time_since_epoch()).count();
+  channel::Verdict v = link_->Receive(s, arrival_ns);
+  if (v.use && s.aggregator_run_id() == seq_run_ && s.seq() < seq_last_) {
+    // An older state of the same run on a new stream (a replay): an incorrect sequence. The same seq is
+    // allowed: a new subscription's first state repeats the one in force.
+    stats_.link_errors.Count(channel::Error::kIncorrectSequence);
+    v.use = false;
+    v.error = true;
+    v.kind = channel::Error::kIncorrectSequence;
+  } else if (v.error) {
+    stats_.link_errors.Count(v.kind);
+  }
+  // Every error but a tolerated loss counts toward the latch, over the client's lifetime.
+  if (v.error && v.kind != channel::Error::kLoss && rate_->Record(arrival_ns)) link_latched_ = true;
+  if (v.use && !link_latched_) {
+    if (s.aggregator_run_id() != seq_run_) {
+      seq_run_ = s.aggregator_run_id();
+      seq_last_ = s.seq();
+    } else {
+      seq_last_ = std::max(seq_last_, s.seq());
+    }
+  }
   if (!v.use) {
     if (v.kind == channel::Error::kAddressing) {
       return StateVerdict::Discard(HaltReason::kWrongRobot, "a state for robot '" + s.robot_name() +
@@ -167,11 +188,11 @@ StateVerdict SafetyMonitor::CheckState(const v1::SafetyState& s, SteadyClock::ti
     }
     return StateVerdict::Discard(HaltReason::kLinkError,
                                  "the safety layer discarded a state: " + std::string(channel::Name(v.kind)) +
-                                     (link_latched_ ? " (error-rate limit reached: no state of this stream is used)" : ""));
+                                     (link_latched_ ? " (error-rate limit reached: no state is used until acknowledged)" : ""));
   }
   if (link_latched_) {
     return StateVerdict::Discard(HaltReason::kLinkError,
-                                 "the error-rate limit was reached on this stream: no state of it is used");
+                                 "the error-rate limit was reached: no state is used until an operator acknowledges it");
   }
   return StateVerdict::Accept();
 }
@@ -339,6 +360,11 @@ void SafetyClient::Stop() {
   if (watchdog_.joinable()) watchdog_.join();
   if (notifier_.joinable()) notifier_.join();
   halted_.store(true, std::memory_order_release);
+}
+
+void SafetyClient::AcknowledgeLinkErrors() {
+  std::lock_guard lock(mu_);
+  monitor_.AcknowledgeLinkErrors();
 }
 
 SafetyStats SafetyClient::Stats() const {

@@ -153,10 +153,17 @@ class SafetyMonitor {
   // halts (NO_HEARTBEAT; told once, and not while already halted for the link itself).
   Action OnSilence(std::chrono::nanoseconds silence, SteadyClock::time_point now);
 
-  // The safety layer's check of one received state, the single place every SafetyState passes through with
-  // its arrival time before the rules above see it: accept, or discard with the halt it causes. Today it
-  // checks the robot's name; integrity (CRC), sequence and freshness checks belong here too.
+  // The safety layer's check of one received state (docs/safety-channel.md), the single place every
+  // SafetyState passes through with its arrival time before the rules above see it: CRC, robot (addressing),
+  // aggregator run, sequence (within the stream, and across streams of the same run: never an older state),
+  // freshness. Accept, or discard with the halt it causes.
   StateVerdict CheckState(const ruffini::v1::SafetyState& state, SteadyClock::time_point arrival);
+
+  // The error-rate rule's latch (docs/safety-channel.md): `limit` errors of the safety layer within its window,
+  // counted over the client's lifetime (a new stream does not forget them), and no state is used until an
+  // operator acknowledges it here. The robot still needs three clean states afterwards.
+  [[nodiscard]] bool link_errors_latched() const noexcept { return link_latched_; }
+  void AcknowledgeLinkErrors() noexcept { link_latched_ = false; }
 
   [[nodiscard]] bool halted() const noexcept { return halted_; }
   [[nodiscard]] HaltReason reason() const noexcept { return reason_; }
@@ -197,7 +204,10 @@ class SafetyMonitor {
   std::uint64_t last_epoch_ = 0;           // stop_epoch of the newest accepted state
   std::array<bool, kHaltReasonCount> discard_reason_{};  // halt reasons CheckState has used
   std::optional<ruffini::channel::StateLinkCheck> link_;  // this stream's safety-layer receiver
-  bool link_latched_ = false;              // the error-rate limit was reached on this stream
+  std::optional<ruffini::channel::ErrorRate> rate_;       // the error-rate rule over the client's lifetime
+  bool link_latched_ = false;              // the error-rate limit was reached (until AcknowledgeLinkErrors)
+  std::uint64_t seq_run_ = 0;              // the aggregator run of seq_last_ ...
+  std::uint64_t seq_last_ = 0;             // ... and the newest seq accepted from it, on any stream
   SafetyStats stats_;
 };
 
@@ -257,6 +267,9 @@ class SafetyClient {
   [[nodiscard]] bool halted() const noexcept { return halted_.load(std::memory_order_acquire); }
   // A snapshot (takes the client's lock for a moment; callable from the callbacks).
   [[nodiscard]] SafetyStats Stats() const;
+  // The operator's acknowledgement of the safety layer's error-rate latch (SafetyMonitor::AcknowledgeLinkErrors):
+  // the robot then still needs three clean states. Takes the client's lock for a moment.
+  void AcknowledgeLinkErrors();
 
  private:
   void ReadLoop();

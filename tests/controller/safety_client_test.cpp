@@ -125,8 +125,14 @@ TEST(SafetyClient, AStateForAnotherRobotHaltsAndIsCounted) {
   EXPECT_TRUE(client.halted());
   EXPECT_TRUE(rec.Has("HALT WRONG_ROBOT"));
   EXPECT_FALSE(rec.Has("CLEAR"));
-  // The same aggregator now names this robot: three clean states release it.
+  // Misaddressed states are the safety layer's errors: past the error-rate limit the client uses no state
+  // until an operator acknowledges it, even once the aggregator names this robot.
+  EXPECT_TRUE(client.Stats().link_errors[ruffini::channel::Error::kAddressing] >= 20);
   agg.SetRobot("cobot");
+  const std::uint64_t before = client.Stats().states;
+  ASSERT_TRUE(rt::WaitFor([&] { return client.Stats().states >= before + 10; }, 5s));  // >= 100 ms of good states
+  EXPECT_FALSE(rec.Has("CLEAR"));
+  client.AcknowledgeLinkErrors();
   ASSERT_TRUE(rt::WaitFor([&] { return rec.Has("CLEAR"); }, 5s));
   client.Stop();
 }

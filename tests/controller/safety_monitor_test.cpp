@@ -304,13 +304,17 @@ TEST(SafetyMonitor, AStateForAnotherRobotIsDiscardedCountedAndHalts) {
   EXPECT_NE(Feed(m, State(kClear, 1, ++seq), t += 10ms).kind, Kind::kClear);
   EXPECT_TRUE(m.halted());
   EXPECT_EQ(m.Stats(t).discarded_by[static_cast<int>(rc::HaltReason::kLinkError)], 1u);
-  // A new stream: our robot's states again, three clean ones release.
+  // A new stream does not release it (the latch outlives streams); an operator's acknowledgement does, then
+  // three clean states.
   m.OnStreamEnded("CANCELLED", t += 1ms);
   m.OnStreamOpened(t += 100ms);
+  for (int i = 0; i < 5; ++i) EXPECT_NE(Feed(m, State(kClear, 1, ++seq), t += 10ms).kind, Kind::kClear);
+  EXPECT_TRUE(m.link_errors_latched());
+  m.AcknowledgeLinkErrors();
   t = ClearUp(m, t, 1, seq);
   EXPECT_FALSE(m.halted());
   st = m.Stats(t);
-  EXPECT_EQ(st.discarded, 12u);
+  EXPECT_EQ(st.discarded, 17u);
   EXPECT_EQ(st.states, seq);
   EXPECT_EQ(st.link_errors[ruffini::channel::Error::kAddressing], 11u);
 }
@@ -459,7 +463,7 @@ TEST(SafetyMonitorLink, EachErrorOnTheStateLinkIsDetectedCountedAndAnsweredAsSta
   }
 }
 
-TEST(SafetyMonitorLink, TwoErrorsWithinTheWindowRefuseTheWholeStreamUntilANewOne) {
+TEST(SafetyMonitorLink, TwoErrorsWithinTheWindowLatchUntilAnOperatorAcknowledgesEvenAcrossStreams) {
   rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);
   std::uint64_t seq = 0;
@@ -469,9 +473,29 @@ TEST(SafetyMonitorLink, TwoErrorsWithinTheWindowRefuseTheWholeStreamUntilANewOne
   EXPECT_FALSE(m.halted()) << "one error: discarded, three clean states release";
   EXPECT_EQ(Feed(m, State(kClear, 1, seq), t += 10ms).halt.reason, rc::HaltReason::kLinkError);
   for (int i = 0; i < 10; ++i) EXPECT_NE(Feed(m, State(kClear, 1, ++seq), t += 10ms).kind, Kind::kClear);
-  EXPECT_TRUE(m.halted()) << "the second error within the window: nothing of this stream is used";
+  EXPECT_TRUE(m.halted()) << "the second error within the window: no state is used";
   m.OnStreamEnded("CANCELLED", t += 1ms);
   m.OnStreamOpened(t += 1ms);
+  for (int i = 0; i < 5; ++i) EXPECT_NE(Feed(m, State(kClear, 1, ++seq), t += 10ms).kind, Kind::kClear);
+  EXPECT_TRUE(m.halted()) << "a new stream does not forget: the latch waits for an operator";
+  m.AcknowledgeLinkErrors();
   t = ClearUp(m, t, 1, seq);
   EXPECT_FALSE(m.halted());
+}
+
+// Review (helper-5) finding 2: a replay of older states of the same aggregator run on a new stream (STOP in
+// force at a newer seq) is an incorrect sequence, never three clean CLEARs.
+TEST(SafetyMonitorLink, AReplayOfOlderStatesOnANewStreamIsRefused) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 100;
+  auto t = ClearUp(m, kT0, 1, seq);
+  EXPECT_EQ(Feed(m, State(kStop, 2, ++seq), t += 10ms).halt.reason, rc::HaltReason::kStop);
+  m.OnStreamEnded("CANCELLED", t += 1ms);
+  m.OnStreamOpened(t += 1ms);
+  // The recorded CLEARs of epoch 1 (seq 101..) replayed.
+  std::uint64_t old_seq = 100;
+  for (int i = 0; i < 6; ++i) EXPECT_NE(Feed(m, State(kClear, 1, ++old_seq), t += 10ms).kind, Kind::kClear);
+  EXPECT_TRUE(m.halted());
+  EXPECT_GE(m.Stats(t).link_errors[ruffini::channel::Error::kIncorrectSequence], 1u);
 }
