@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "process.h"
+#include "service_process.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "safety_client.h"
 #include "scrape.h"
@@ -36,18 +37,6 @@ namespace fs = std::filesystem;
 
 const std::string kDir = std::string(RUFFINI_SOURCE_DIR) + "/tests/fault";
 const std::string kScene = kDir + "/one-patch.yaml";
-
-rt::Process StartWithPorts(std::vector<std::string> args, const std::string& dir, const std::string& key, int& port) {
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  args.push_back("--ports-file");
-  args.push_back(dir + "/ports");
-  rt::Process p(args, dir);
-  EXPECT_TRUE(rt::WaitFor([&] { return rt::ReadPorts(dir + "/ports").count(key) > 0 || !p.Running(); }, 20s))
-      << p.stderr_text();
-  port = rt::ReadPorts(dir + "/ports")[key];
-  return p;
-}
 
 std::unique_ptr<v1::Aggregator::Stub> Stub(int port) {
   return v1::Aggregator::NewStub(
@@ -96,18 +85,18 @@ TEST_P(PatchLinkTable, DetectedCountedAndAnswered) {
   const PatchRow& row = GetParam();
   const std::string base = (fs::current_path() / ("patch_" + row.error)).string();
   int agg_port = 0, sim_port = 0, proxy_port = 0, dec_metrics = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
                                     "--metrics", "127.0.0.1:0"},
                                    base + "/aggregator", "grpc", agg_port);
   const int agg_metrics = rt::ReadPorts(base + "/aggregator/ports")["metrics"];
   std::vector<std::string> proxy_args = {RUFFINI_FAULT_PROXY_EXE, "--upstream", "127.0.0.1:" + std::to_string(agg_port),
                                          "--link", "patch", "--error", row.error, "--at", "400"};
   proxy_args.insert(proxy_args.end(), row.extra.begin(), row.extra.end());
-  rt::Process proxy = StartWithPorts(proxy_args, base + "/proxy", "grpc", proxy_port);
-  rt::Process sim = StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kDir + "/quiet.yaml", "--rate-hz",
+  rt::Process proxy = rt::StartWithPorts(proxy_args, base + "/proxy", "grpc", proxy_port);
+  rt::Process sim = rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kDir + "/quiet.yaml", "--rate-hz",
                                     "1000", "--command-port", "0", "--stream-port", "0"},
                                    base + "/sim", "stream", sim_port);
-  rt::Process dec = StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", "forearm",
+  rt::Process dec = rt::StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", "forearm",
                                     "--interrogator", "127.0.0.1:" + std::to_string(sim_port), "--aggregator",
                                     "127.0.0.1:" + std::to_string(proxy_port), "--metrics", "127.0.0.1:0", "--rate-hz",
                                     "1000", "--silence-ms", "100", "--freshness-budget-ms", "200"},
@@ -198,10 +187,10 @@ TEST_P(StateLinkTable, DetectedCountedAndAnswered) {
   const StateRow& row = GetParam();
   const std::string base = (fs::current_path() / ("state_" + row.error)).string();
   int agg_port = 0, proxy_port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
                                     "--metrics", "127.0.0.1:0"},
                                    base + "/aggregator", "grpc", agg_port);
-  rt::Process proxy = StartWithPorts({RUFFINI_FAULT_PROXY_EXE, "--upstream", "127.0.0.1:" + std::to_string(agg_port),
+  rt::Process proxy = rt::StartWithPorts({RUFFINI_FAULT_PROXY_EXE, "--upstream", "127.0.0.1:" + std::to_string(agg_port),
                                       "--link", "state", "--error", row.error, "--at", "30", "--delay-ms", "60"},
                                      base + "/proxy", "grpc", proxy_port);
   // The controller's side: the client library's state machine, fed as the states arrive.

@@ -25,6 +25,18 @@ std::int64_t SaturatingAdd(std::int64_t a, std::int64_t b) noexcept {
   return out;
 }
 
+// A discarded message: counted, and the error-rate rule asked whether the link must latch now.
+Verdict Discarded(ErrorCounts& counts, ErrorRate& rate, Error e, std::int64_t arrival_steady_ns) noexcept {
+  counts.Count(e);
+  Verdict v;
+  v.use = false;
+  v.error = true;
+  v.kind = e;
+  v.rate_latch = rate.Record(arrival_steady_ns);
+  v.latch = v.rate_latch;
+  return v;
+}
+
 }  // namespace
 
 std::string_view Name(Error e) noexcept {
@@ -117,14 +129,7 @@ PatchLinkCheck::PatchLinkCheck(LinkConfig config, std::uint64_t aggregator_run_i
       rate_(config.error_rate) {}
 
 Verdict PatchLinkCheck::Discard(Error e, std::int64_t arrival_steady_ns) noexcept {
-  counts_.Count(e);
-  Verdict v;
-  v.use = false;
-  v.error = true;
-  v.kind = e;
-  v.rate_latch = rate_.Record(arrival_steady_ns);
-  v.latch = v.rate_latch;
-  return v;
+  return Discarded(counts_, rate_, e, arrival_steady_ns);
 }
 
 Verdict PatchLinkCheck::Receive(const v1::PatchMessage& m, std::int64_t arrival_steady_ns) noexcept {
@@ -171,14 +176,7 @@ StateLinkCheck::StateLinkCheck(LinkConfig config, std::string robot_name)
     : robot_name_(std::move(robot_name)), freshness_(config.freshness), rate_(config.error_rate) {}
 
 Verdict StateLinkCheck::Discard(Error e, std::int64_t arrival_steady_ns) noexcept {
-  counts_.Count(e);
-  Verdict v;
-  v.use = false;
-  v.error = true;
-  v.kind = e;
-  v.rate_latch = rate_.Record(arrival_steady_ns);
-  v.latch = v.rate_latch;
-  return v;
+  return Discarded(counts_, rate_, e, arrival_steady_ns);
 }
 
 Verdict StateLinkCheck::Receive(const v1::SafetyState& s, std::int64_t arrival_steady_ns) noexcept {
