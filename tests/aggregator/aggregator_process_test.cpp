@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "process.h"
+#include "service_process.h"
 #include "scrape.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 
@@ -35,19 +36,6 @@ const std::string kScenario = kSrc + "/config/scenarios/cobot-demo.yaml";
 const std::vector<std::string> kPatches = {"forearm_a", "forearm_b", "upper_arm_a", "upper_arm_b"};
 
 using rt::ReadPorts;
-
-// Starts an executable that writes a ports file; waits for `key` in it.
-rt::Process StartWithPorts(std::vector<std::string> args, const std::string& dir, const std::string& key, int& port) {
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  args.push_back("--ports-file");
-  args.push_back(dir + "/ports");
-  rt::Process p(args, dir);
-  EXPECT_TRUE(rt::WaitFor([&] { return ReadPorts(dir + "/ports").count(key) > 0 || !p.Running(); }, 15s));
-  port = ReadPorts(dir + "/ports")[key];
-  EXPECT_GT(port, 0) << p.stderr_text();
-  return p;
-}
 
 struct Seen {
   v1::SafetyState state;
@@ -186,7 +174,7 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   // Deadlines widened (200 ms silence, 200 ms joint-state age, 200 ms freshness) so that a loaded 2-core CI machine does not
   // fault a healthy patch on the way to CLEAR; the scene's own 30 ms / 50 ms deadlines meet real processes in
   // TheScenesOwnDeadlinesASigstoppedDecoderFaultsWithinFiftyMs below (and on an injected clock in the safety tests).
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
                                     "127.0.0.1:0", "--patch-silence-ms", "200", "--joint-max-age-ms", "200",
                                     "--patch-freshness-ms", "200"},
                                    base + "/aggregator", "grpc", grpc_port);
@@ -205,13 +193,13 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
   ASSERT_EQ(status.joint_names_size(), 7);
   controller.StartJoints({status.joint_names().begin(), status.joint_names().end()});
 
-  rt::Process sim = StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kScenario, "--rate-hz", "1000",
+  rt::Process sim = rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kScenario, "--rate-hz", "1000",
                                     "--command-port", "0", "--stream-port", "0"},
                                    base + "/sim", "stream", sim_port);
   std::vector<rt::Process> decoders;
   for (const auto& p : kPatches) {
     int metrics = 0;
-    decoders.push_back(StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", p, "--interrogator",
+    decoders.push_back(rt::StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", p, "--interrogator",
                                        "127.0.0.1:" + std::to_string(sim_port), "--aggregator", address, "--metrics",
                                        "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100",
                                        "--freshness-budget-ms", "200"},
@@ -335,7 +323,7 @@ TEST(AggregatorProcess, MetricsPassPromtool) {
   if (std::system("command -v promtool >/dev/null 2>&1") != 0) GTEST_SKIP() << "promtool not installed";
   const std::string dir = (fs::current_path() / "aggregator_metrics").string();
   int grpc_port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
                                     "127.0.0.1:0"},
                                    dir, "grpc", grpc_port);
   Controller watcher("127.0.0.1:" + std::to_string(grpc_port));
@@ -350,7 +338,7 @@ TEST(AggregatorProcess, MetricsPassPromtool) {
 TEST(AggregatorProcess, ASubscriberThatStopsReadingIsDroppedNotWaitedFor) {
   const std::string dir = (fs::current_path() / "aggregator_stuck").string();
   int grpc_port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
                                     "127.0.0.1:0"},
                                    dir, "grpc", grpc_port);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
@@ -385,35 +373,16 @@ TEST(AggregatorProcess, ASubscriberThatStopsReadingIsDroppedNotWaitedFor) {
   EXPECT_FALSE(reader->Finish().ok());
 }
 
-// grpc.health.v1.Health/Check with an empty request; the reply's status (1 = SERVING), or -1 on an error.
-int HealthCheck(const std::string& address) {
-  grpc::GenericStub stub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + 3s);
-  grpc::Slice empty("");  // HealthCheckRequest{service: ""} serialises to no bytes
-  grpc::ByteBuffer request(&empty, 1), response;
-  std::promise<grpc::Status> done;
-  stub.UnaryCall(&ctx, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request, &response,
-                 [&](grpc::Status st) { done.set_value(st); });
-  if (!done.get_future().get().ok()) return -1;
-  std::vector<grpc::Slice> slices;
-  response.Dump(&slices);
-  std::string bytes;
-  for (const auto& sl : slices) bytes.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
-  // HealthCheckResponse{status = 1}: field 1, varint -> 0x08 0x01.
-  return bytes.size() == 2 && bytes[0] == 0x08 ? bytes[1] : -1;
-}
-
 TEST(AggregatorProcess, HealthIsServedInPlaintextOnItsOwnPort) {
   const std::string dir = (fs::current_path() / "aggregator_health").string();
   int grpc_port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--scene", kScene, "--listen", "127.0.0.1:0", "--metrics",
                                     "127.0.0.1:0", "--health-listen", "127.0.0.1:0", "--insecure"},
                                    dir, "grpc", grpc_port);
   const int health = rt::ReadPorts(dir + "/ports")["health"];
   ASSERT_GT(health, 0);
-  EXPECT_EQ(HealthCheck("127.0.0.1:" + std::to_string(health)), 1);
-  EXPECT_EQ(HealthCheck("127.0.0.1:" + std::to_string(grpc_port)), 1);  // and on the service port
+  EXPECT_EQ(rt::HealthCheck("127.0.0.1:" + std::to_string(health)), 1);
+  EXPECT_EQ(rt::HealthCheck("127.0.0.1:" + std::to_string(grpc_port)), 1);  // and on the service port
   // Only health there: the Aggregator service is not on the health port.
   auto stub = v1::Aggregator::NewStub(grpc::CreateChannel("127.0.0.1:" + std::to_string(health),
                                                           grpc::InsecureChannelCredentials()));
@@ -442,7 +411,7 @@ TEST(AggregatorProcess, ASceneWithoutSafetyIsAClearError) {
 TEST(AggregatorProcess, TheScenesOwnDeadlinesASigstoppedDecoderFaultsWithinFiftyMs) {
   const std::string base = (fs::current_path() / "aggregator_deadlines").string();
   int grpc_port = 0, sim_port = 0, metrics = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
                                     "--metrics", "127.0.0.1:0"},
                                    base + "/aggregator", "grpc", grpc_port);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
@@ -450,10 +419,10 @@ TEST(AggregatorProcess, TheScenesOwnDeadlinesASigstoppedDecoderFaultsWithinFifty
   const auto status = controller.Status();
   ASSERT_EQ(status.joint_names_size(), 7);
   controller.StartJoints({status.joint_names().begin(), status.joint_names().end()});
-  rt::Process sim = StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kScenario, "--rate-hz", "1000",
+  rt::Process sim = rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kScenario, "--rate-hz", "1000",
                                     "--command-port", "0", "--stream-port", "0"},
                                    base + "/sim", "stream", sim_port);
-  rt::Process decoder = StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", "forearm_a",
+  rt::Process decoder = rt::StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", "forearm_a",
                                         "--interrogator", "127.0.0.1:" + std::to_string(sim_port), "--aggregator", address,
                                         "--metrics", "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100"},
                                        base + "/decoder", "metrics", metrics);

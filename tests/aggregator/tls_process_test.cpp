@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "process.h"
+#include "service_process.h"
 #include "seal.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "scrape.h"
@@ -31,18 +32,6 @@ namespace fs = std::filesystem;
 const std::string kSrc = RUFFINI_SOURCE_DIR;
 const std::string kScene = kSrc + "/config/scenes/cobot.yaml";
 const std::vector<std::string> kPatches = {"forearm_a", "forearm_b", "upper_arm_a", "upper_arm_b"};
-
-rt::Process StartWithPorts(std::vector<std::string> args, const std::string& dir, const std::string& key, int& port) {
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  args.push_back("--ports-file");
-  args.push_back(dir + "/ports");
-  rt::Process p(args, dir);
-  EXPECT_TRUE(rt::WaitFor([&] { return rt::ReadPorts(dir + "/ports").count(key) > 0 || !p.Running(); }, 15s));
-  port = rt::ReadPorts(dir + "/ports")[key];
-  EXPECT_GT(port, 0) << p.stderr_text();
-  return p;
-}
 
 std::string Slurp(const std::string& path) {
   std::ifstream in(path);
@@ -131,7 +120,7 @@ TEST_F(TlsProcess, OperatorResetsOverMutualTlsAndEveryRefusalIsCountedAndChanges
   const Certs& certs = MakeCerts();
   const std::string base = (fs::current_path() / "tls_chain").string();
   int grpc_port = 0, metrics_port = 0, sim_port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--tls-dir", certs.good, "--scene", kScene, "--listen",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--tls-dir", certs.good, "--scene", kScene, "--listen",
                                     "127.0.0.1:0", "--metrics", "127.0.0.1:0", "--patch-silence-ms", "200",
                                     "--joint-max-age-ms", "200"},
                                    base + "/aggregator", "grpc", grpc_port);
@@ -149,13 +138,13 @@ TEST_F(TlsProcess, OperatorResetsOverMutualTlsAndEveryRefusalIsCountedAndChanges
   fs::create_directories(base);
   const std::string quiet = base + "/quiet.yaml";  // nothing touches the skin
   std::ofstream(quiet) << "loop: true\nduration_s: 60.0\nseed: 7\npresses: []\n";
-  rt::Process sim = StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", quiet, "--rate-hz", "1000",
+  rt::Process sim = rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", quiet, "--rate-hz", "1000",
                                     "--command-port", "0", "--stream-port", "0"},
                                    base + "/sim", "stream", sim_port);
   std::vector<rt::Process> decoders;
   for (const auto& p : kPatches) {
     int metrics = 0;
-    decoders.push_back(StartWithPorts({RUFFINI_DECODER_EXE, "--tls-dir", certs.good, "--scene", kScene, "--patch", p,
+    decoders.push_back(rt::StartWithPorts({RUFFINI_DECODER_EXE, "--tls-dir", certs.good, "--scene", kScene, "--patch", p,
                                        "--interrogator", "127.0.0.1:" + std::to_string(sim_port), "--aggregator",
                                        address, "--metrics", "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100"},
                                       base + "/decoder_" + p, "metrics", metrics));
@@ -278,7 +267,7 @@ TEST_F(TlsProcess, AClientRefusesAnAggregatorFromAnotherCa) {
   const Certs& certs = MakeCerts();
   const std::string base = (fs::current_path() / "tls_rogue_server").string();
   int port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--tls-dir", certs.rogue, "--scene", kScene, "--listen",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--tls-dir", certs.rogue, "--scene", kScene, "--listen",
                                     "127.0.0.1:0", "--metrics", "127.0.0.1:0"},
                                    base + "/aggregator", "grpc", port);
   const std::string address = "127.0.0.1:" + std::to_string(port);
@@ -297,7 +286,7 @@ TEST_F(TlsProcess, AClientRefusesAnAggregatorFromAnotherCa) {
 TEST_F(TlsProcess, InsecureIsLoggedAsAWarning) {
   const std::string dir = (fs::current_path() / "tls_insecure").string();
   int port = 0;
-  rt::Process agg = StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
                                     "--metrics", "127.0.0.1:0"},
                                    dir, "grpc", port);
   EXPECT_NE(agg.stderr_text().find("PLAINTEXT"), std::string::npos) << agg.stderr_text();
