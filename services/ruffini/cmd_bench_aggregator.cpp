@@ -11,13 +11,14 @@
 #include <string>
 #include <thread>
 
-#include "aggregator_bench.h"
+#include "ruffini/harness/aggregator_bench.h"
 #include "commands.h"
 #include "ruffini/service/common.h"
 #include "ruffini/error.h"
 #include "ruffini/service/child.h"
 
 namespace ruffini::cli {
+using namespace ruffini::harness;  // the runs themselves live in services/harness
 namespace {
 
 namespace fs = std::filesystem;

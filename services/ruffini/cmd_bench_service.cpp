@@ -11,9 +11,10 @@
 #include "commands.h"
 #include "ruffini/service/common.h"
 #include "ruffini/error.h"
-#include "service_bench.h"
+#include "ruffini/harness/service_bench.h"
 
 namespace ruffini::cli {
+using namespace ruffini::harness;  // the runs themselves live in services/harness
 namespace {
 
 namespace fs = std::filesystem;

@@ -7,11 +7,12 @@
 #include <string>
 
 #include "commands.h"
-#include "demo.h"
+#include "ruffini/harness/demo.h"
 #include "ruffini/service/common.h"
 #include "ruffini/error.h"
 
 namespace ruffini::cli {
+using namespace ruffini::harness;  // the runs themselves live in services/harness
 
 void RegisterDemoCommand(CLI::App& app) {
   auto o = std::make_shared<DemoOptions>();

@@ -20,9 +20,9 @@
 #include <string>
 #include <vector>
 
-#include "service_bench.h"  // Quantiles, Machine
+#include "ruffini/harness/service_bench.h"  // Quantiles, Machine
 
-namespace ruffini::cli {
+namespace ruffini::harness {
 
 struct AggregatorBenchOptions {
   std::string out_dir;
@@ -87,4 +87,4 @@ FanInRun RunFanIn(const AggregatorBenchOptions& o, int patches, const std::funct
 void WriteAggregatorReport(const AggregatorBenchOptions& o, const Machine& m, const std::vector<LatencyRun>& latency,
                            const std::vector<FanInRun>& fanin, const std::string& micro, const std::string& micro_command);
 
-}  // namespace ruffini::cli
+}  // namespace ruffini::harness

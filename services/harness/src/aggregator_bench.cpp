@@ -1,6 +1,6 @@
 // `ruffini bench-aggregator`: the runs (aggregator_bench.h). The report is aggregator_bench_report.cpp.
 // Every wait has a deadline; every process is stopped by pid (SIGTERM, then SIGKILL after a grace period).
-#include "aggregator_bench.h"
+#include "ruffini/harness/aggregator_bench.h"
 
 #include "ruffini/channel/checkers.h"
 #include "ruffini/channel/crc.h"
@@ -36,7 +36,7 @@
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "scene_setup.h"
 
-namespace ruffini::cli {
+namespace ruffini::harness {
 namespace {
 
 namespace fs = std::filesystem;
@@ -748,4 +748,4 @@ FanInRun RunFanIn(const AggregatorBenchOptions& o, int patches, const std::funct
   return run;
 }
 
-}  // namespace ruffini::cli
+}  // namespace ruffini::harness

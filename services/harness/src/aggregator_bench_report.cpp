@@ -9,11 +9,11 @@
 #include <fstream>
 #include <sstream>
 
-#include "aggregator_bench.h"
+#include "ruffini/harness/aggregator_bench.h"
 #include "ruffini/error.h"
 #include "ruffini/plot/svg.h"
 
-namespace ruffini::cli {
+namespace ruffini::harness {
 namespace {
 
 std::string Fixed(double v, int digits) {
@@ -211,4 +211,4 @@ void WriteAggregatorReport(const AggregatorBenchOptions& o, const Machine& m, co
   WriteCdf(latency, svg_path);
 }
 
-}  // namespace ruffini::cli
+}  // namespace ruffini::harness

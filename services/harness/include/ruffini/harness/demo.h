@@ -7,7 +7,7 @@
 #include <functional>
 #include <string>
 
-namespace ruffini::cli {
+namespace ruffini::harness {
 
 struct DemoOptions {
   std::string scene_path;      // the cobot scene
@@ -30,4 +30,4 @@ struct DemoResult {
 // without a robot or safety section); a failed expectation is counted, not thrown.
 DemoResult RunDemo(const DemoOptions& options, const std::function<void(const std::string&)>& log);
 
-}  // namespace ruffini::cli
+}  // namespace ruffini::harness

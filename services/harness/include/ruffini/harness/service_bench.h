@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-namespace ruffini::cli {
+namespace ruffini::harness {
 
 struct ServiceBenchOptions {
   std::string scene_path;     // the scene; its patch `patch` names the model
@@ -100,4 +100,4 @@ std::string LoadAverage();
 void WriteServiceReport(const ServiceBenchOptions& o, const Machine& m, const ThroughputResult& t,
                         const std::vector<EndToEndRun>& runs);
 
-}  // namespace ruffini::cli
+}  // namespace ruffini::harness

@@ -27,11 +27,11 @@
 #include "ruffini/error.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "ruffini/service/child.h"
-#include "service_bench.h"
+#include "ruffini/harness/service_bench.h"
 
 extern char** environ;
 
-namespace ruffini::cli {
+namespace ruffini::harness {
 namespace {
 
 namespace fs = std::filesystem;
@@ -315,4 +315,4 @@ EndToEndRun RunEndToEnd(const ServiceBenchOptions& o, double rate_hz, const std:
   return run;
 }
 
-}  // namespace ruffini::cli
+}  // namespace ruffini::harness

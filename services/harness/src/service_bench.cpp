@@ -1,6 +1,6 @@
 // `ruffini bench-service`, part 1: the decoder's "parse to message" throughput on one thread, and the
 // report (service_bench.h). The end-to-end part is service_bench_e2e.cpp.
-#include "service_bench.h"
+#include "ruffini/harness/service_bench.h"
 
 #include <unistd.h>
 
@@ -26,7 +26,7 @@
 #include "ruffini/twin/scene.h"
 #include "ruffini/v1/patch.pb.h"
 
-namespace ruffini::cli {
+namespace ruffini::harness {
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -518,4 +518,4 @@ void WriteServiceReport(const ServiceBenchOptions& o, const Machine& m, const Th
   WriteHistogram(runs, svg_path);
 }
 
-}  // namespace ruffini::cli
+}  // namespace ruffini::harness

@@ -1,4 +1,4 @@
-#include "demo.h"
+#include "ruffini/harness/demo.h"
 
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
@@ -30,7 +30,7 @@
 #include "ruffini/service/tls.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 
-namespace ruffini::cli {
+namespace ruffini::harness {
 namespace {
 
 namespace fs = std::filesystem;
@@ -630,4 +630,4 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   return result;
 }
 
-}  // namespace ruffini::cli
+}  // namespace ruffini::harness
