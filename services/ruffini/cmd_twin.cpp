@@ -33,18 +33,27 @@ struct SceneArgs {
 void AddSceneOptions(CLI::App* cmd, SceneArgs& a) {
   cmd->add_option("--scene", a.scene, "Scene file (YAML)")->capture_default_str();
   cmd->add_option("--patch", a.patch, "Patch of the scene to use (default: the only one)");
-  cmd->add_option("--skin-sample", a.skin_sample, "Skin sample (cast) seed; overrides the scene's")
+  cmd->add_option("--skin-sample", a.skin_sample, "Skin sample (cast) seed; overrides the scene's and every patch's own (casts:)")
       ->check(CLI::Range(0.0, 1099511627776.0));
 }
 
 twin::Scene LoadSceneArgs(const SceneArgs& a) {
   twin::Scene s = twin::LoadScene(a.scene);
-  if (a.skin_sample) twin::OverrideSkinSample(s, *a.skin_sample);
+  if (a.skin_sample) {
+    twin::OverrideSkinSample(s, *a.skin_sample);
+    for (twin::ScenePatch& p : s.patches) p.cast_seed.reset();  // the override is every patch's cast
+  }
   return s;
 }
 
+// The patch's effects with its own cast (the twin section's `casts:`), as ruffini-sim builds its twin.
+twin::TwinEffects EffectsOf(const twin::Scene& s, const twin::ScenePatch& p) {
+  return s.EffectsOf(static_cast<std::size_t>(&p - s.patches.data()));
+}
+
 std::unique_ptr<twin::SkinTwin> BuildTwin(const twin::Scene& s, const std::string& patch) {
-  return std::make_unique<twin::SkinTwin>(s.Patch(patch).spec, s.effects, std::vector<double>{s.probe.radius_mm});
+  const twin::ScenePatch& p = s.Patch(patch);
+  return std::make_unique<twin::SkinTwin>(p.spec, EffectsOf(s, p), std::vector<double>{s.probe.radius_mm});
 }
 
 twin::ProgressFn Bar(std::unique_ptr<ProgressBar>& bar, const std::string& label) {
@@ -214,7 +223,7 @@ void RegisterCalibrate(CLI::App& app) {
   cmd->callback([args]() {
     const twin::Scene scene = LoadSceneArgs(args->scene);
     const auto& sp = scene.Patch(args->scene.patch);
-    const double t = twin::CalibrateStrainTransfer(sp.spec, scene.effects, scene.probe, args->target_mm2);
+    const double t = twin::CalibrateStrainTransfer(sp.spec, EffectsOf(scene, sp), scene.probe, args->target_mm2);
     std::printf("strain_transfer: %.4g   # put this into %s (fibre.strain_transfer)\n", t, sp.spec_path.c_str());
   });
 }

@@ -35,7 +35,7 @@ namespace ruffini::decode {
 enum class Reason : std::uint8_t {
   kOk = 0,
   kCapturing,       // no baseline yet (start-up capture of the untouched peaks)
-  kSaturated,       // the source flagged the frame as saturated (a peak clipped: overload)
+  kSaturated,       // the source flagged the frame kFlagSaturated (ruffini/frame.h: beyond the twin's linear model)
   kNoSignal,        // every peak missing or at 0 nm: no light, a broken fibre, an empty frame
   kOutOfBand,       // a peak outside its grating's band: it cannot be that grating's peak
   kTooManyMissing,  // more missing peaks than max_missing
