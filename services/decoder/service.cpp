@@ -395,11 +395,22 @@ bool DecoderService::Impl::PublishOneStream() {
   std::thread reader([&] {
     v1::AggregatorCommand cmd;
     while (stream->Read(&cmd)) {
+      if (cmd.has_hello_accepted() && cmd.hello_accepted().robot_name() != scene.name) {
+        // Addressing: this aggregator guards another robot (or names none) than this decoder's scene. Nothing
+        // but the hello went out; the stream ends and the decoder tries again like after a refused hello.
+        refused = true;
+        stats.hello_wrong_robot.fetch_add(1, std::memory_order_relaxed);
+        spdlog::error("aggregator {}: accepted the hello but guards robot '{}', not this scene's '{}': ending the "
+                      "stream (a decoder pointed at another robot's aggregator?); retrying",
+                      config.aggregator.str(), cmd.hello_accepted().robot_name(), scene.name);
+        break;
+      }
       if (cmd.has_hello_accepted()) {
         aggregator_run = cmd.hello_accepted().aggregator_run_id();
         accepted = true;
-        spdlog::info("aggregator {}: hello accepted (patch {}, watchdog {} ms)", config.aggregator.str(),
-                     cmd.hello_accepted().patch_id(), static_cast<double>(cmd.hello_accepted().watchdog_ns()) / 1e6);
+        spdlog::info("aggregator {}: hello accepted (patch {}, robot {}, watchdog {} ms)", config.aggregator.str(),
+                     cmd.hello_accepted().patch_id(), cmd.hello_accepted().robot_name(),
+                     static_cast<double>(cmd.hello_accepted().watchdog_ns()) / 1e6);
       } else if (cmd.has_hello_refused()) {
         refused = true;
         stats.hello_refused.fetch_add(1, std::memory_order_relaxed);

@@ -123,6 +123,9 @@ std::vector<MetricFamily> StatsCollectable::Collect() const {
   counter("ruffini_decoder_hello_refused_total", "Hellos the aggregator refused.", s.hello_refused);
   counter("ruffini_decoder_hello_timeouts_total", "Connect streams given up because the hello got no answer in time.",
           s.hello_timeouts);
+  counter("ruffini_decoder_hello_wrong_robot_total",
+          "Hellos accepted by an aggregator guarding another robot than the scene's (stream ended, retried).",
+          s.hello_wrong_robot);
   counter("ruffini_decoder_late_frames_total",
           "Interrogator frames that waited past the freshness budget before decoding (dropped; an overload fault).",
           s.late_frames);

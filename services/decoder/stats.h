@@ -43,6 +43,7 @@ struct Stats {
   std::atomic<std::uint64_t> late_frames{0};    // frames that waited past the freshness budget in ring A
   std::atomic<std::uint64_t> late_messages{0};  // messages that waited past the freshness budget in ring B
   std::atomic<std::uint64_t> hello_timeouts{0}; // streams ended because the hello got no answer in time
+  std::atomic<std::uint64_t> hello_wrong_robot{0}; // hellos accepted by an aggregator of another robot
   std::array<std::atomic<std::uint64_t>, 3> messages_sent{};  // by link::Message::Kind
 };
 

@@ -46,6 +46,13 @@ class AggregatorStub final : public v1::Aggregator::Service {
   [[nodiscard]] int port() const noexcept { return port_; }
   [[nodiscard]] std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
 
+  // The robot named in HelloAccepted.robot_name from now on. By default "forearm-bench", the name of
+  // config/scenes/forearm.yaml, the scene the decoder tests run: a decoder refuses an aggregator of another robot.
+  void SetRobotName(std::string name) {
+    std::lock_guard lock(mutex_);
+    robot_name_ = std::move(name);
+  }
+
   // Refuse every hello from now on with this reason (nullopt: accept).
   void RefuseHellos(std::optional<v1::HelloRefusal> reason) {
     std::lock_guard lock(mutex_);
@@ -92,10 +99,12 @@ class AggregatorStub final : public v1::Aggregator::Service {
       const auto now = std::chrono::duration_cast<std::chrono::nanoseconds>(
                            std::chrono::system_clock::now().time_since_epoch()).count();
       std::optional<v1::HelloRefusal> refusal;
+      std::string robot;
       {
         std::lock_guard lock(mutex_);
         received_.push_back({m, now, id});
         refusal = refusal_;
+        robot = robot_name_;
       }
       cv_.notify_all();
       if (m.has_hello()) {
@@ -111,6 +120,7 @@ class AggregatorStub final : public v1::Aggregator::Service {
         c.mutable_hello_accepted()->set_patch_id(m.patch_id());
         c.mutable_hello_accepted()->set_watchdog_ns(30'000'000);
         c.mutable_hello_accepted()->set_aggregator_instance("aggregator-stub");
+        c.mutable_hello_accepted()->set_robot_name(robot);
         stream->Write(c);
       }
     }
@@ -129,6 +139,7 @@ class AggregatorStub final : public v1::Aggregator::Service {
   std::condition_variable cv_;
   std::vector<Received> received_;
   std::optional<v1::HelloRefusal> refusal_;
+  std::string robot_name_ = "forearm-bench";
   std::atomic<int> streams_{0}, open_{0};
   bool closing_ = false;
 };

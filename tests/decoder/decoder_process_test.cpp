@@ -376,4 +376,22 @@ TEST_F(DecoderProcess, ARefusedHelloIsLoggedAndRetried) {
   EXPECT_GE(Metric(Scrape(dec.metrics_port), "ruffini_decoder_hello_refused_total{patch=\"forearm\"}"), 1.0);
 }
 
+TEST_F(DecoderProcess, AnAggregatorOfAnotherRobotIsRefusedThenTheRightOneGetsTheStream) {
+  AggregatorStub agg;
+  agg.SetRobotName("other-cell");  // accepts the hello, but guards another robot than forearm-bench
+  Sim sim = Sim::Start(Dir("sim"));
+  Decoder dec = Decoder::Start(Dir("dec"), sim.stream_port, agg.address());
+  ASSERT_TRUE(agg.WaitFor([&](const auto&) { return agg.streams_opened() >= 2; }, 10s));
+  EXPECT_TRUE(dec.process.Running());
+  EXPECT_TRUE(rt::WaitFor([&] {
+    return dec.process.stderr_text().find("guards robot 'other-cell', not this scene's 'forearm-bench'") != std::string::npos;
+  }, 2s)) << dec.process.stderr_text();
+  EXPECT_GE(Metric(Scrape(dec.metrics_port), "ruffini_decoder_hello_wrong_robot_total{patch=\"forearm\"}"), 1.0);
+  // Nothing but hellos went to the wrong aggregator.
+  for (const Received& r : agg.Snapshot()) EXPECT_TRUE(r.message.has_hello()) << r.message.ShortDebugString();
+  // The aggregator of this scene's robot gets the stream: heartbeats follow.
+  agg.SetRobotName("forearm-bench");
+  EXPECT_TRUE(agg.WaitFor(HealthyHeartbeat, 15s));
+}
+
 }  // namespace
