@@ -3,7 +3,9 @@
 // PublishJointStates, and obeys the safety client (safety_client.h) for its robot (--robot): on every halt it
 // freezes the trajectory and keeps publishing the held position; on a clear it resumes (ramping its speed up
 // over --resume-s). stdout: one line per safety transition ("t=1.234 s HALT STOP: STOP epoch 3 cause contact
-// upper_arm_a 1.60 N ...") and a summary at exit. Logs go to stderr. Exit codes as the other tools: 0 ok
+// upper_arm_a 1.60 N ...") and a summary at exit. Logs go to stderr. The operator acknowledges the safety
+// layer's error-rate latch (HALT LINK_ERROR ... latched) with SIGUSR1 (`kill -USR1 PID`): one "ACK LINK_ERRORS"
+// line says whether a latch was released. Exit codes as the other tools: 0 ok
 // (SIGINT, SIGTERM or --duration-s), 1 bad input or an aggregator that cannot be reached or guards another
 // robot (the message says which), 2 usage.
 //
@@ -141,6 +143,8 @@ int main(int argc, char** argv) {
   std::string aggregator, robot, trajectory = "sine", subscriber = "ruffini-controller";
   double rate_hz = 1000, duration_s = 0, amplitude_rad = 0.2, resume_s = 0.5, connect_timeout_s = 5;
   int heartbeat_timeout_ms = 30;
+  double freshness_budget_ms = 20, link_error_window_s = 60;
+  int link_error_limit = 2;
   app.add_option("--aggregator", aggregator, "The aggregator's gRPC address, HOST:PORT")->required();
   app.add_option("--robot", robot,
                  "This robot's name, the scene's (e.g. cobot): states from an aggregator guarding another robot are "
@@ -155,6 +159,14 @@ int main(int argc, char** argv) {
   app.add_option("--resume-s", resume_s, "Speed ramp after a clear, s")->capture_default_str()->check(CLI::Range(0.0, 10.0));
   app.add_option("--heartbeat-timeout-ms", heartbeat_timeout_ms, "Halt when no safety state came for this long, ms")
       ->capture_default_str()->check(CLI::Range(11, 1000));
+  app.add_option("--freshness-budget-ms", freshness_budget_ms,
+                 "Discard (and halt LATE on) a safety state older than this, ms (docs/safety-channel.md)")
+      ->capture_default_str()->check(CLI::Range(1.0, 10000.0));
+  app.add_option("--link-error-limit", link_error_limit,
+                 "Safety-layer errors within --link-error-window-s that latch the halt until SIGUSR1")
+      ->capture_default_str()->check(CLI::Range(1, 8));
+  app.add_option("--link-error-window-s", link_error_window_s, "The error-rate rule's window, s")
+      ->capture_default_str()->check(CLI::Range(0.001, 86400.0));
   app.add_option("--connect-timeout-s", connect_timeout_s, "How long to wait for the aggregator's GetStatus at start, s")
       ->capture_default_str()->check(CLI::Range(0.1, 600.0));
   app.add_option("--subscriber", subscriber, "The name this controller gives the aggregator")->capture_default_str();
@@ -166,11 +178,16 @@ int main(int argc, char** argv) {
   app.add_flag("--insecure", insecure, "Plaintext gRPC to the aggregator (logged as a warning)")->excludes(tls_opt);
   CLI11_PARSE(app, argc, argv);
 
-  sigset_t stop_signals;
+  // Blocked in every thread (all start after this) and taken by the cycle with sigpending/sigwait.
+  sigset_t stop_signals, ack_signals, blocked;
   sigemptyset(&stop_signals);
   sigaddset(&stop_signals, SIGINT);
   sigaddset(&stop_signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+  sigemptyset(&ack_signals);
+  sigaddset(&ack_signals, SIGUSR1);
+  blocked = stop_signals;
+  sigaddset(&blocked, SIGUSR1);
+  pthread_sigmask(SIG_BLOCK, &blocked, nullptr);
   signal(SIGPIPE, SIG_IGN);
 
   try {
@@ -219,6 +236,9 @@ int main(int argc, char** argv) {
     config.subscriber = subscriber;
     config.monitor.robot_name = robot;
     config.monitor.heartbeat_timeout = std::chrono::milliseconds(heartbeat_timeout_ms);
+    config.monitor.link.freshness.budget_ns = static_cast<std::int64_t>(freshness_budget_ms * 1e6);
+    config.monitor.link.error_rate.limit = link_error_limit;
+    config.monitor.link.error_rate.window_ns = static_cast<std::int64_t>(link_error_window_s * 1e9);
     rc::SafetyClient safety(
         rc::AggregatorChannelFactory(address.str(), credentials), config,
         [&](const rc::HaltEvent& e) {
@@ -229,6 +249,7 @@ int main(int argc, char** argv) {
           } else {
             text += ": " + e.detail;
           }
+          if (e.link_errors_latched) text += " [latched: acknowledge with SIGUSR1]";
           line(e.t, text);
         },
         [&](const rc::ClearEvent& e) {
@@ -283,6 +304,18 @@ int main(int argc, char** argv) {
         sigwait(&stop_signals, &sig);
         spdlog::info("signal {}: stopping", sig);
         break;
+      }
+      if (sigismember(&pending, SIGUSR1)) {
+        // The operator's acknowledgement of the error-rate latch. The robot still needs three clean states.
+        int ack = 0;
+        sigwait(&ack_signals, &ack);
+        if (safety.AcknowledgeLinkErrors()) {
+          line(Clock::now(), "ACK LINK_ERRORS: the operator acknowledged the error-rate latch (SIGUSR1); states are "
+                             "used again, three clean CLEARs release");
+          spdlog::warn("SIGUSR1: the safety layer's error-rate latch acknowledged by the operator");
+        } else {
+          line(Clock::now(), "ACK LINK_ERRORS: nothing to acknowledge (SIGUSR1; no error-rate latch held)");
+        }
       }
       const auto now = Clock::now();
       if (now >= end) break;
@@ -365,6 +398,17 @@ int main(int argc, char** argv) {
                   static_cast<unsigned long long>(st.discarded), static_cast<unsigned long long>(st.streams_opened),
                   static_cast<unsigned long long>(st.channels_created), static_cast<double>(st.max_state_gap.count()) / 1e6,
                   st.states > st.discarded ? rc::DescribeState(st.last_state).c_str() : "none");
+    out.Push(buf, true);
+    std::string errors;
+    for (std::size_t k = 0; k < ruffini::channel::kErrorKinds; ++k) {
+      if (st.link_errors.by_error[k] == 0) continue;
+      if (!errors.empty()) errors += ", ";
+      errors += std::string(ruffini::channel::Name(static_cast<ruffini::channel::Error>(k))) + " " +
+                std::to_string(st.link_errors.by_error[k]);
+    }
+    std::snprintf(buf, sizeof buf, "summary: link errors: %s; error-rate latch %s, acknowledged %llu\n",
+                  errors.empty() ? "none" : errors.c_str(), st.link_errors_latched ? "held" : "not held",
+                  static_cast<unsigned long long>(st.link_acknowledgements));
     out.Push(buf, true);
     std::snprintf(buf, sizeof buf, "summary: stdout lines dropped %llu\n", static_cast<unsigned long long>(out.dropped()));
     out.Push(buf, true);

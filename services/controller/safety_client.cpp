@@ -119,9 +119,13 @@ SafetyMonitor::Action SafetyMonitor::Halt(HaltReason reason, std::string detail,
   const v1::SafetyState& s = state ? *state : stats_.last_state;
   const std::uint64_t epoch = s.stop_epoch();
   const Run run = RunOf(s);
-  if (halted_ && reason == reason_ && (!StateReason(reason) || (epoch == halt_epoch_ && run == halt_run_))) return {};
+  if (halted_ && reason == reason_ && link_latched_ == halt_latched_ &&
+      (!StateReason(reason) || (epoch == halt_epoch_ && run == halt_run_))) {
+    return {};
+  }
   if (!halted_) halted_since_ = now;
   halted_ = true;
+  halt_latched_ = link_latched_;
   reason_ = reason;
   halt_epoch_ = epoch;
   halt_run_ = run;
@@ -133,6 +137,7 @@ SafetyMonitor::Action SafetyMonitor::Halt(HaltReason reason, std::string detail,
   a.halt.detail = std::move(detail);
   a.halt.t = now;
   a.halt.silence = silence;
+  a.halt.link_errors_latched = link_latched_;
   return a;
 }
 
@@ -291,6 +296,7 @@ SafetyStats SafetyMonitor::Stats(SteadyClock::time_point now) const {
   SafetyStats s = stats_;
   s.halted = halted_;
   s.reason = reason_;
+  s.link_errors_latched = link_latched_;
   if (halted_) s.time_halted += std::chrono::duration_cast<nanoseconds>(now - halted_since_);
   return s;
 }
@@ -362,9 +368,9 @@ void SafetyClient::Stop() {
   halted_.store(true, std::memory_order_release);
 }
 
-void SafetyClient::AcknowledgeLinkErrors() {
+bool SafetyClient::AcknowledgeLinkErrors() {
   std::lock_guard lock(mu_);
-  monitor_.AcknowledgeLinkErrors();
+  return monitor_.AcknowledgeLinkErrors();
 }
 
 SafetyStats SafetyClient::Stats() const {

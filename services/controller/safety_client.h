@@ -79,6 +79,7 @@ struct HaltEvent {
   std::string detail;              // e.g. "no state for 31.0 ms", "stream ended: UNAVAILABLE: aggregator shutting down"
   SteadyClock::time_point t{};     // when the client decided (its steady clock)
   std::chrono::nanoseconds silence{0};  // kNoHeartbeat: time since the last state (or since the stream opened)
+  bool link_errors_latched = false;     // the error-rate latch holds: no state is used until AcknowledgeLinkErrors
 };
 
 // A decision that the robot may move again.
@@ -103,6 +104,8 @@ struct SafetyStats {
   std::chrono::nanoseconds time_halted{0};    // total time halted, up to the moment of the query
   bool halted = true;
   HaltReason reason = HaltReason::kNotStarted;  // meaningful while halted
+  bool link_errors_latched = false;   // the error-rate latch holds (until AcknowledgeLinkErrors)
+  std::uint64_t link_acknowledgements = 0;  // AcknowledgeLinkErrors calls that released a latch
   ruffini::v1::SafetyState last_state;        // the newest accepted state (empty before the first)
 };
 
@@ -163,7 +166,13 @@ class SafetyMonitor {
   // counted over the client's lifetime (a new stream does not forget them), and no state is used until an
   // operator acknowledges it here. The robot still needs three clean states afterwards.
   [[nodiscard]] bool link_errors_latched() const noexcept { return link_latched_; }
-  void AcknowledgeLinkErrors() noexcept { link_latched_ = false; }
+  // Returns whether a latch was held (and is now released).
+  bool AcknowledgeLinkErrors() noexcept {
+    const bool was = link_latched_;
+    link_latched_ = false;
+    if (was) ++stats_.link_acknowledgements;
+    return was;
+  }
 
   [[nodiscard]] bool halted() const noexcept { return halted_; }
   [[nodiscard]] HaltReason reason() const noexcept { return reason_; }
@@ -206,6 +215,7 @@ class SafetyMonitor {
   std::optional<ruffini::channel::StateLinkCheck> link_;  // this stream's safety-layer receiver
   std::optional<ruffini::channel::ErrorRate> rate_;       // the error-rate rule over the client's lifetime
   bool link_latched_ = false;              // the error-rate limit was reached (until AcknowledgeLinkErrors)
+  bool halt_latched_ = false;              // link_latched_ when the current halt was told (a new latch is told)
   std::uint64_t seq_run_ = 0;              // the aggregator run of seq_last_ ...
   std::uint64_t seq_last_ = 0;             // ... and the newest seq accepted from it, on any stream
   SafetyStats stats_;
@@ -248,7 +258,8 @@ class SafetyClient {
   using ClearCallback = std::function<void(const ClearEvent&)>;
 
   // Does not connect yet: Start() does. on_halt is called on every halt decision: the first one, and
-  // again while halted whenever the reason or the stop_epoch changes (it must be idempotent). on_clear is
+  // again while halted whenever the reason or the stop_epoch changes or the error-rate latch begins (it must
+  // be idempotent). on_clear is
   // called when the robot may move again. Either may be empty. Throws std::invalid_argument when
   // config.monitor.robot_name is empty.
   SafetyClient(ChannelFactory make_channel, SafetyClientConfig config, HaltCallback on_halt, ClearCallback on_clear);
@@ -268,8 +279,9 @@ class SafetyClient {
   // A snapshot (takes the client's lock for a moment; callable from the callbacks).
   [[nodiscard]] SafetyStats Stats() const;
   // The operator's acknowledgement of the safety layer's error-rate latch (SafetyMonitor::AcknowledgeLinkErrors):
-  // the robot then still needs three clean states. Takes the client's lock for a moment.
-  void AcknowledgeLinkErrors();
+  // the robot then still needs three clean states. Returns whether a latch was held (false: nothing to
+  // acknowledge). Takes the client's lock for a moment; callable from any thread, not from a callback.
+  bool AcknowledgeLinkErrors();
 
  private:
   void ReadLoop();

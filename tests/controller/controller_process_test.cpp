@@ -278,6 +278,59 @@ TEST(ControllerProcess, RuffiniControllerStopsOnSigtermWithExitZero) {
   EXPECT_EQ(agg.Stop(), 0);
 }
 
+// The safety layer's error-rate latch needs an operator: ruffini-fault-proxy corrupts two SafetyStates on the
+// state link (within the 60 s window), ruffini-controller halts LINK_ERROR latched and uses no state until
+// SIGUSR1, then the aggregator's FAULT is seen again (states are used). The latch holds meanwhile.
+TEST(ControllerProcess, RuffiniControllerHoldsTheLinkErrorLatchUntilSigusr1) {
+  int port = 0, proxy_port = 0;
+  const std::string base = Base("ack");
+  rt::Process agg = StartAggregator(base + "/aggregator", "127.0.0.1:0", port);
+  fs::create_directories(base + "/proxy");
+  rt::Process proxy({RUFFINI_FAULT_PROXY_EXE, "--upstream", "127.0.0.1:" + std::to_string(port), "--link", "state",
+                     "--error", "corruption", "--at", "5", "--every", "3", "--times", "2", "--ports-file",
+                     base + "/proxy/ports"},
+                    base + "/proxy");
+  ASSERT_TRUE(rt::WaitFor([&] { return ReadPorts(base + "/proxy/ports").count("grpc") > 0 || !proxy.Running(); }, 15s));
+  proxy_port = ReadPorts(base + "/proxy/ports")["grpc"];
+  ASSERT_GT(proxy_port, 0) << proxy.stderr_text();
+  // A generous freshness budget: only the proxy's corruptions count toward the latch on a loaded machine.
+  rt::Process ctl({RUFFINI_CONTROLLER_EXE, "--insecure", "--robot", "cobot", "--aggregator",
+                   "127.0.0.1:" + std::to_string(proxy_port), "--freshness-budget-ms", "500"},
+                  base + "/controller");
+  const std::string latched = "[latched: acknowledge with SIGUSR1]";
+  ASSERT_TRUE(rt::WaitFor([&] { return ctl.stdout_text().find(latched) != std::string::npos || !ctl.Running(); }, 10s))
+      << ctl.stdout_text() << ctl.stderr_text();
+  ASSERT_TRUE(ctl.Running()) << ctl.stderr_text();
+  std::string out = ctl.stdout_text();
+  const auto latch_at = out.find(latched);
+  EXPECT_EQ(out.rfind("HALT LINK_ERROR", latch_at), out.rfind("HALT", latch_at)) << out;
+  // Latched: the aggregator's FAULT states keep coming but none is used (no new decision).
+  EXPECT_FALSE(rt::WaitFor([&] { return ctl.stdout_text().find("HALT FAULT", latch_at) != std::string::npos; }, 500ms))
+      << ctl.stdout_text();
+  ctl.Signal(SIGUSR1);
+  const std::string acked = "ACK LINK_ERRORS: the operator acknowledged the error-rate latch";
+  ASSERT_TRUE(rt::WaitFor([&] { return ctl.stdout_text().find(acked) != std::string::npos || !ctl.Running(); }, 5s))
+      << ctl.stdout_text() << ctl.stderr_text();
+  ASSERT_TRUE(rt::WaitFor([&] {
+    const std::string o = ctl.stdout_text();
+    return o.find("HALT FAULT: FAULT epoch ", o.find(acked)) != std::string::npos;  // start-up, or joint states stale
+  }, 5s)) << ctl.stdout_text();
+  // A second SIGUSR1 has nothing to acknowledge, and says so.
+  ctl.Signal(SIGUSR1);
+  EXPECT_TRUE(rt::WaitFor([&] { return ctl.stdout_text().find("ACK LINK_ERRORS: nothing to acknowledge") != std::string::npos; }, 5s))
+      << ctl.stdout_text();
+  EXPECT_EQ(ctl.Stop(), 0) << ctl.stderr_text();
+  EXPECT_FALSE(ctl.killed());
+  out = ctl.stdout_text();
+  std::printf("%s", out.c_str());
+  std::fflush(stdout);
+  EXPECT_NE(out.find("summary: link errors: corruption 2"), std::string::npos) << out;
+  EXPECT_NE(out.find("error-rate latch not held, acknowledged 1"), std::string::npos) << out;
+  EXPECT_NE(out.find("; clears 0;"), std::string::npos) << "the aggregator never cleared";
+  EXPECT_EQ(proxy.Stop(), 0);
+  EXPECT_EQ(agg.Stop(), 0);
+}
+
 TEST(ControllerProcess, ABadAddressIsAClearError) {
   const std::string base = Base("badaddress");
   {

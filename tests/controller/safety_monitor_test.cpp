@@ -295,7 +295,8 @@ TEST(SafetyMonitor, AStateForAnotherRobotIsDiscardedCountedAndHalts) {
   auto st = m.Stats(t);
   EXPECT_EQ(st.discarded, 11u);
   EXPECT_EQ(st.discarded_by[static_cast<int>(rc::HaltReason::kWrongRobot)], 11u);
-  EXPECT_EQ(st.halts[static_cast<int>(rc::HaltReason::kWrongRobot)], 1u);  // told once
+  // Told when it began and once more when the second one latched the error-rate rule, not for every state.
+  EXPECT_EQ(st.halts[static_cast<int>(rc::HaltReason::kWrongRobot)], 2u);
   EXPECT_EQ(st.last_state.robot_name(), kRobot);                          // discarded states are not kept
   // A discarded state is no heartbeat: the watchdog counts from the last accepted one.
   EXPECT_GT(m.Silence(t), 30ms);
@@ -479,6 +480,31 @@ TEST(SafetyMonitorLink, TwoErrorsWithinTheWindowLatchUntilAnOperatorAcknowledges
   for (int i = 0; i < 5; ++i) EXPECT_NE(Feed(m, State(kClear, 1, ++seq), t += 10ms).kind, Kind::kClear);
   EXPECT_TRUE(m.halted()) << "a new stream does not forget: the latch waits for an operator";
   m.AcknowledgeLinkErrors();
+  t = ClearUp(m, t, 1, seq);
+  EXPECT_FALSE(m.halted());
+}
+
+// The latch is told even when the halt's reason does not change (two errors in a row), and the operator's
+// acknowledgement says whether a latch was held (ruffini-controller's SIGUSR1 prints it).
+TEST(SafetyMonitorLink, TheLatchIsToldAndTheAcknowledgementSaysWhetherOneWasHeld) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 0;
+  auto t = ClearUp(m, kT0, 1, seq);
+  const auto first = Feed(m, State(kClear, 1, seq), t += 10ms);  // a repetition
+  ASSERT_EQ(first.kind, Kind::kHalt);
+  EXPECT_FALSE(first.halt.link_errors_latched);
+  const auto second = Feed(m, State(kClear, 1, seq), t += 10ms);  // again: LINK_ERROR again, now latched
+  ASSERT_EQ(second.kind, Kind::kHalt) << "the latch is a new decision although the reason is the same";
+  EXPECT_EQ(second.halt.reason, rc::HaltReason::kLinkError);
+  EXPECT_TRUE(second.halt.link_errors_latched);
+  EXPECT_EQ(Feed(m, State(kClear, 1, ++seq), t += 10ms).kind, Kind::kNone) << "told once";
+  EXPECT_TRUE(m.Stats(t).link_errors_latched);
+  EXPECT_TRUE(m.AcknowledgeLinkErrors());
+  EXPECT_FALSE(m.AcknowledgeLinkErrors()) << "nothing held any more";
+  const auto st = m.Stats(t);
+  EXPECT_FALSE(st.link_errors_latched);
+  EXPECT_EQ(st.link_acknowledgements, 1u);
   t = ClearUp(m, t, 1, seq);
   EXPECT_FALSE(m.halted());
 }

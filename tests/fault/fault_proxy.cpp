@@ -18,7 +18,8 @@
 //   --error none                forward only
 //
 // N counts the link's messages of each stream from 1 (the hello is 1 on the patch link) and is --at; with
-// --every K the alteration repeats every K messages after N (for the error-rate rule). Only the first stream
+// --every K the alteration repeats every K messages after N (for the error-rate rule), --times M times in all
+// (0: without end). Only the first stream
 // of the link (--streams 0: every stream) is altered. Other calls (GetStatus, ResetStop, PublishJointStates,
 // WatchContacts) are forwarded unchanged. The chosen port goes to --ports-file ("grpc P"); each alteration
 // made is printed on stdout ("altered <error> at <n> t_ns <Unix ns>"), so a test can wait for it.
@@ -51,13 +52,14 @@ struct Options {
   std::string error = "none";
   int at = 20;
   int every = 0;
+  int times = 0;  // with every: alter this many messages in all (0: no limit)
   int delay_ms = 100;
   int streams = 1;
 };
 
 bool Hits(const Options& o, int n) {
   if (n == o.at) return true;
-  return o.every > 0 && n > o.at && (n - o.at) % o.every == 0;
+  return o.every > 0 && n > o.at && (n - o.at) % o.every == 0 && (o.times == 0 || (n - o.at) / o.every < o.times);
 }
 
 void Say(const std::string& what, int n) {
@@ -300,6 +302,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--at", o.at, "The message (of a stream, from 1) to alter")->check(CLI::Range(1, 1 << 30))->capture_default_str();
   app.add_option("--every", o.every, "Repeat every K messages after --at (0: once)")->check(CLI::Range(0, 1 << 30));
+  app.add_option("--times", o.times, "With --every: alter this many messages in all (0: no limit)")->check(CLI::Range(0, 1 << 30));
   app.add_option("--delay-ms", o.delay_ms, "For delay: how long each message is held")->check(CLI::Range(1, 60000))
       ->capture_default_str();
   app.add_option("--streams", o.streams, "Alter the first K streams of the link (0: every stream)")->capture_default_str();
