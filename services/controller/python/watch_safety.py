@@ -12,6 +12,14 @@ halt of any kind. It halts (and the count starts again) on:
   a CLEAR from a new aggregator run (NEW_RUN: aggregator_run_id or aggregator_start_t_ns changed);
   silence longer than the watchdog (NO_HEARTBEAT); the stream ending (STREAM_ENDED) or not opening
   (CONNECT_FAILED).
+Before those rules every state passes the safety layer's checks (docs/safety-channel.md), as in the C++
+client: the CRC-32 over its safety fields (safety_crc32, the canonical layout of patches/channel/src/crc.cpp),
+the robot (addressing), the aggregator run of the stream (insertion), the sequence (a repeat, an older seq, or
+an older seq of the same run on a new stream, is discarded; a gap is counted and tolerated) and freshness
+(the age against the offset between the aggregator's steady clock, sender_steady_ns, and this host's, learned
+per stream: older than --freshness-budget-ms is discarded, LATE). A discarded state halts (LINK_ERROR,
+WRONG_ROBOT or LATE) and is no heartbeat. Two such errors within --link-error-window-s latch: no state is used
+until the operator acknowledges with SIGUSR1 (`kill -USR1 PID`, an "ACK LINK_ERRORS" line).
 A real controller would command its robot where this prints HALT and CLEAR.
 
 The channel sends HTTP/2 keepalive pings every 1 s (a dead peer is found in about 2 s); a stream silent for
@@ -30,13 +38,89 @@ import collections
 import os
 import queue
 import signal
+import struct
 import sys
 import threading
 import time
+import zlib
 
 CLEAR, STOP, FAULT = 1, 2, 3  # SafetyState.State values (aggregator.proto)
 LINK_REASONS = {"NO_HEARTBEAT", "STREAM_ENDED", "CONNECT_FAILED"}
 STATE_REASONS = {"STOP", "FAULT", "UNKNOWN_STATE", "MISSED_STOP", "NEW_RUN"}
+
+
+def safety_crc32(s):
+    """The CRC-32 over a SafetyState's safety fields (everything but safety_crc32 and cause.message), in the
+    canonical layout of patches/channel/src/crc.cpp (docs/safety-channel.md): integers little-endian at their
+    proto width, enums 4 bytes, floats and doubles their IEEE 754 bytes, strings a 4-byte length then UTF-8.
+    CRC-32/IEEE 802.3, which is zlib's."""
+    def u64(v): return struct.pack("<Q", v & 0xFFFFFFFFFFFFFFFF)
+    def i64(v): return struct.pack("<q", v)
+    def i32(v): return struct.pack("<i", v)
+    def f32(v): return struct.pack("<f", v)
+    def f64(v): return struct.pack("<d", v)
+    def text(v):
+        b = v.encode()
+        return struct.pack("<I", len(b)) + b
+    k = s.cause
+    data = b"".join((
+        i32(s.state), u64(s.stop_epoch), u64(s.seq), i64(s.changed_t_ns), i64(s.published_t_ns),
+        i64(s.aggregator_start_t_ns), u64(s.aggregator_run_id), text(s.robot_name), i64(s.sender_steady_ns),
+        i32(k.kind), text(k.patch_id), text(k.body_region), text(k.link), f32(k.force_n), f32(k.threshold_n),
+        f64(k.p_bc_m.x), f64(k.p_bc_m.y), f64(k.p_bc_m.z), i32(k.patch_fault), i64(k.t_ns)))
+    return zlib.crc32(data)
+
+
+class StateLink:
+    """The safety layer's receiver for one WatchSafety stream (ruffini::channel::StateLinkCheck): receive()
+    returns (error, use, age_ns), error None or one of "corruption", "addressing", "insertion", "repetition",
+    "incorrect_sequence", "loss" (tolerated: use is True), "delay"."""
+
+    def __init__(self, robot, budget_ns, max_drift_ppm=200.0):
+        self.robot, self.budget_ns, self.max_drift_ppm = robot, budget_ns, max_drift_ppm
+        self.run_id = 0  # learned from the stream's first good state
+        self.last_seq = 0
+        self.offset_ns = None  # this host's steady clock minus the aggregator's: the fastest state, with creep
+        self.last_arrival_ns = 0
+
+    def age(self, sent_ns, arrival_ns):
+        """How much longer this state took than the fastest one of the stream (the first has age 0); the
+        learned offset may creep up by max_drift_ppm of the time elapsed (two steady clocks' rates differ)."""
+        offset = arrival_ns - sent_ns
+        if self.offset_ns is None:
+            self.offset_ns, self.last_arrival_ns = offset, arrival_ns
+            return 0
+        creep = int(max(0, arrival_ns - self.last_arrival_ns) * self.max_drift_ppm * 1e-6)
+        self.last_arrival_ns = max(self.last_arrival_ns, arrival_ns)
+        self.offset_ns = min(self.offset_ns + creep, offset)
+        return offset - self.offset_ns
+
+    def receive(self, s, arrival_ns):
+        if safety_crc32(s) != s.safety_crc32:
+            return "corruption", False, 0
+        if s.robot_name != self.robot:
+            return "addressing", False, 0
+        if s.aggregator_run_id == 0:
+            return "insertion", False, 0
+        if self.run_id == 0:
+            self.run_id = s.aggregator_run_id
+        elif s.aggregator_run_id != self.run_id:
+            return "insertion", False, 0
+        error = None
+        if self.last_seq == 0 and s.seq != 0:  # a subscriber joins the shared counter anywhere
+            self.last_seq = s.seq
+        elif s.seq == 0 or s.seq < self.last_seq:
+            return "incorrect_sequence", False, 0
+        elif s.seq == self.last_seq:
+            return "repetition", False, 0
+        else:
+            if s.seq > self.last_seq + 1:
+                error = "loss"  # tolerable: states are latest-value, the watchdog bounds the silence
+            self.last_seq = s.seq
+        age = self.age(s.sender_steady_ns, arrival_ns)
+        if age > self.budget_ns:
+            return "delay", False, age
+        return error, True, age
 
 
 class Monitor:
@@ -44,10 +128,22 @@ class Monitor:
     in seconds on a monotonic clock). Each on_* returns None or a decision: ("HALT", reason, detail, state)
     or ("CLEAR", None, "", state)."""
 
-    def __init__(self, robot, timeout_s=0.030, states_before_clear=3, now=0.0):
+    def __init__(self, robot, timeout_s=0.030, states_before_clear=3, now=0.0, freshness_budget_s=0.020,
+                 error_limit=2, error_window_s=60.0):
         if not robot:
             raise ValueError("the robot's name is required")
+        if not 1 <= error_limit <= 8 or not error_window_s > 0 or not freshness_budget_s > 0:
+            raise ValueError("the error-rate limit must lie in 1..8, its window and the freshness budget above 0")
         self.robot, self.timeout_s, self.n_clear = robot, timeout_s, max(1, states_before_clear)
+        self.budget_ns = int(freshness_budget_s * 1e9)
+        self.error_limit, self.error_window_ns = error_limit, int(error_window_s * 1e9)
+        self.error_times = collections.deque(maxlen=error_limit)  # the newest errors (error-rate rule)
+        self.link_latched = False  # the error-rate limit was reached: no state is used until acknowledged
+        self.halt_latched = False  # link_latched when the current halt was told (a new latch is told)
+        self.acknowledgements = 0
+        self.link_errors = collections.Counter()  # the safety layer's detections by error (loss included)
+        self.link = StateLink(robot, self.budget_ns)
+        self.seq_run = self.seq_last = 0  # the newest seq accepted from an aggregator run, on any stream
         self.halted, self.reason = True, "NOT_STARTED"
         self.halt_key = None  # (epoch, run) of the state behind the current halt
         self.stream_open = self.stream_has_state = False
@@ -66,20 +162,55 @@ class Monitor:
         self.streak = 0  # every halt, told or not, ends the streak
         s = state if state is not None else self.last_state
         key = (s.stop_epoch, self.run_of(s)) if s is not None else None
-        if self.halted and reason == self.reason and (reason not in STATE_REASONS or key == self.halt_key):
+        if (self.halted and reason == self.reason and self.link_latched == self.halt_latched
+                and (reason not in STATE_REASONS or key == self.halt_key)):
             return None
-        self.halted, self.reason, self.halt_key = True, reason, key
+        self.halted, self.reason, self.halt_key, self.halt_latched = True, reason, key, self.link_latched
+        if self.link_latched:
+            detail += " [latched: acknowledge with SIGUSR1]"
         return ("HALT", reason, detail, s)
 
     def check_state(self, s, arrival):
-        """The safety layer's check of every received state (with its arrival time): (True, None, "") or
-        (False, halt_reason, detail). Integrity, sequence and freshness checks belong here too."""
-        if s.robot_name != self.robot:
-            return False, "WRONG_ROBOT", f"a state for robot '{s.robot_name}', not this controller's '{self.robot}'"
+        """The safety layer's check of every received state (arrival in seconds on this host's monotonic
+        clock), SafetyMonitor::CheckState in the C++ client: (True, None, "") or (False, halt_reason, detail)."""
+        arrival_ns = int(round(arrival * 1e9))
+        error, use, age = self.link.receive(s, arrival_ns)
+        if use and s.aggregator_run_id == self.seq_run and s.seq < self.seq_last:
+            # An older state of the same run on a new stream (a replay). The same seq is allowed: a new
+            # subscription's first state repeats the one in force.
+            error, use = "incorrect_sequence", False
+        if error is not None:
+            self.link_errors[error] += 1
+        if error is not None and error != "loss":  # every error but a tolerated loss counts toward the latch
+            self.error_times.append(arrival_ns)
+            if len(self.error_times) == self.error_limit and arrival_ns - self.error_times[0] <= self.error_window_ns:
+                self.link_latched = True
+        if use and not self.link_latched:
+            if s.aggregator_run_id != self.seq_run:
+                self.seq_run, self.seq_last = s.aggregator_run_id, s.seq
+            else:
+                self.seq_last = max(self.seq_last, s.seq)
+        if not use:
+            if error == "addressing":
+                return False, "WRONG_ROBOT", f"a state for robot '{s.robot_name}', not this controller's '{self.robot}'"
+            if error == "delay":
+                return False, "LATE", f"a state {age // 1000000} ms old (budget {self.budget_ns // 1000000} ms)"
+            return False, "LINK_ERROR", f"the safety layer discarded a state: {error}"
+        if self.link_latched:
+            return False, "LINK_ERROR", "the error-rate limit was reached: no state is used until an operator acknowledges it"
         return True, None, ""
+
+    def acknowledge_link_errors(self):
+        """The operator's acknowledgement of the error-rate latch; True when one was held. The robot still
+        needs three clean states."""
+        was, self.link_latched = self.link_latched, False
+        self.acknowledgements += was
+        return was
 
     def on_stream_opened(self, now):
         self.stream_open, self.stream_has_state, self.last_evidence, self.streak = True, False, now, 0
+        # A new stream learns the aggregator's clock offset anew; the latch and the run's newest seq are kept.
+        self.link = StateLink(self.robot, self.budget_ns)
 
     def on_state(self, s, now):
         if not self.stream_open:
@@ -156,6 +287,11 @@ def main():
     parser.add_argument("--stubs", default="", help="folder holding the generated ruffini/v1/*_pb2*.py")
     parser.add_argument("--duration-s", type=float, default=0.0, help="stop after this long (0: until Ctrl-C)")
     parser.add_argument("--timeout-ms", type=float, default=30.0, help="halt when no state came for this long")
+    parser.add_argument("--freshness-budget-ms", type=float, default=20.0,
+                        help="discard (and halt LATE on) a state older than this (docs/safety-channel.md)")
+    parser.add_argument("--link-error-limit", type=int, default=2, choices=range(1, 9), metavar="1..8",
+                        help="safety-layer errors within the window that latch the halt until SIGUSR1")
+    parser.add_argument("--link-error-window-s", type=float, default=60.0, help="the error-rate rule's window")
     parser.add_argument("--subscriber", default="watch_safety.py", help="the name given to the aggregator")
     tls = parser.add_mutually_exclusive_group(required=True)
     tls.add_argument("--tls-dir", help="mutual TLS: ca.crt and this client's controller.crt / controller.key "
@@ -179,7 +315,11 @@ def main():
     Kind = aggregator_pb2.SafetyCause.Kind
     t0 = time.monotonic()
     lock = threading.Lock()  # the monitor; never held while printing
-    monitor = Monitor(args.robot, args.timeout_ms / 1000.0, now=t0)
+    try:
+        monitor = Monitor(args.robot, args.timeout_ms / 1000.0, now=t0, freshness_budget_s=args.freshness_budget_ms / 1000.0,
+                          error_limit=args.link_error_limit, error_window_s=args.link_error_window_s)
+    except ValueError as e:
+        parser.error(str(e))
     lines = queue.Queue()  # printed by the main thread, in the order the decisions were made
     gaps = {"max_s": 0.0}
     done = threading.Event()
@@ -252,11 +392,13 @@ def main():
                         if got_any:
                             gaps["max_s"] = max(gaps["max_s"], now - monitor.last_evidence)
                         got_any = True
+                        refused = monitor.counts["refused"]
+                        event = monitor.on_state(s, now)
                         key = (s.state, s.stop_epoch, s.aggregator_run_id, s.aggregator_start_t_ns, s.robot_name)
-                        if key != previous:
+                        if monitor.counts["refused"] == refused and key != previous:  # only states it accepted
                             lines.put(f"t={now - t0:.3f} s {describe(s)}")
                             previous = key
-                        tell(monitor.on_state(s, now), now)
+                        tell(event, now)
             except grpc.RpcError as e:
                 code = e.code().name
             if done.is_set():
@@ -281,8 +423,21 @@ def main():
                     current["cancelled_for_silence"] = True
                     call.cancel()
 
+    ack = threading.Event()  # SIGUSR1: the operator acknowledges the error-rate latch (handled below)
+
+    def acknowledge():
+        with lock:
+            now = time.monotonic()
+            if monitor.acknowledge_link_errors():
+                text = ("ACK LINK_ERRORS: the operator acknowledged the error-rate latch (SIGUSR1); states are used "
+                        "again, three clean CLEARs release")
+            else:
+                text = "ACK LINK_ERRORS: nothing to acknowledge (SIGUSR1; no error-rate latch held)"
+            lines.put(f"t={now - t0:.3f} s {text}")
+
     signal.signal(signal.SIGINT, lambda *_: done.set())
     signal.signal(signal.SIGTERM, lambda *_: done.set())
+    signal.signal(signal.SIGUSR1, lambda *_: ack.set())
     threads = [threading.Thread(target=reader, daemon=True), threading.Thread(target=watchdog, daemon=True)]
     for t in threads:
         t.start()
@@ -299,6 +454,9 @@ def main():
         if deadline is not None and time.monotonic() >= deadline:
             done.set()
             break
+        if ack.is_set():
+            ack.clear()
+            acknowledge()
         try:
             print(lines.get(timeout=0.05), flush=True)
         except queue.Empty:
@@ -316,6 +474,9 @@ def main():
     print(f"received {sum(v for k, v in counts.items() if k != 'refused')} states ({by_state or 'none'}), "
           f"refused {counts['refused']}, longest gap {gaps['max_s'] * 1000:.1f} ms, halted at exit: {monitor.halted}",
           flush=True)
+    errors = ", ".join(f"{k} {v}" for k, v in sorted(monitor.link_errors.items())) or "none"
+    print(f"link errors: {errors}; error-rate latch {'held' if monitor.link_latched else 'not held'}, "
+          f"acknowledged {monitor.acknowledgements}", flush=True)
     return 0
 
 
