@@ -145,6 +145,7 @@ int main(int argc, char** argv) {
   int heartbeat_timeout_ms = 30;
   double freshness_budget_ms = 20, link_error_window_s = 60;
   int link_error_limit = 2;
+  bool watch_only = false, unix_time = false;
   app.add_option("--aggregator", aggregator, "The aggregator's gRPC address, HOST:PORT")->required();
   app.add_option("--robot", robot,
                  "This robot's name, the scene's (e.g. cobot): states from an aggregator guarding another robot are "
@@ -170,6 +171,12 @@ int main(int argc, char** argv) {
   app.add_option("--connect-timeout-s", connect_timeout_s, "How long to wait for the aggregator's GetStatus at start, s")
       ->capture_default_str()->check(CLI::Range(0.1, 600.0));
   app.add_option("--subscriber", subscriber, "The name this controller gives the aggregator")->capture_default_str();
+  app.add_flag("--watch-only", watch_only,
+               "Publish no joint states: only obey the safety state (a second controller or a safety PLC beside the "
+               "one that owns the robot's joint states)");
+  app.add_flag("--unix-time", unix_time,
+               "Stamp each stdout line with Unix time (t_unix_ns=N) instead of seconds since start (t=S s), so that "
+               "a test harness can line them up with other processes' clocks");
   std::string tls_dir;
   bool insecure = false;
   auto* tls_opt = app.add_option("--tls-dir", tls_dir,
@@ -227,9 +234,15 @@ int main(int argc, char** argv) {
 
     const auto t0 = Clock::now();
     LineWriter out(1024);
-    auto line = [t0, &out](Clock::time_point t, const std::string& text) {
-      char stamp[32];
-      std::snprintf(stamp, sizeof stamp, "t=%.3f s ", Seconds(t - t0));
+    auto line = [t0, unix_time, &out](Clock::time_point t, const std::string& text) {
+      char stamp[48];
+      if (unix_time) {
+        // The event's steady time on the Unix clock: now on both clocks, minus how long ago it was.
+        const auto ago = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t).count();
+        std::snprintf(stamp, sizeof stamp, "t_unix_ns=%lld ", static_cast<long long>(ruffini::service::UnixNowNs() - ago));
+      } else {
+        std::snprintf(stamp, sizeof stamp, "t=%.3f s ", Seconds(t - t0));
+      }
       out.Push(stamp + text + "\n");
     };
     rc::SafetyClientConfig config;
@@ -269,6 +282,10 @@ int main(int argc, char** argv) {
     v1::PublishJointStatesResponse totals;
     grpc::Status finish;
     std::thread publishing([&] {
+      if (watch_only) {  // no stream at all: this controller only obeys
+        publisher_done = true;
+        return;
+      }
       std::vector<double> q(names.size()), qd(names.size());
       for (;;) {
         std::int64_t t_ns = 0;
@@ -330,7 +347,7 @@ int main(int argc, char** argv) {
         q[i] = traj.Position(i, tau_s);
         qd[i] = speed * traj.Velocity(i, tau_s);
       }
-      {
+      if (!watch_only) {
         std::lock_guard lock(slot.mu);
         std::copy(q.begin(), q.end(), slot.q.begin());
         std::copy(qd.begin(), qd.end(), slot.qd.begin());

@@ -11,5 +11,6 @@ void RegisterBenchServiceCommand(CLI::App& app);
 void RegisterBenchAggregatorCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
 void RegisterResetCommand(CLI::App& app);
+void RegisterSoakCommand(CLI::App& app);
 
 }  // namespace ruffini::cli

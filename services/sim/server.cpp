@@ -446,6 +446,9 @@ struct SimServer::Impl {
     start = std::chrono::steady_clock::now();
     const std::int64_t after_ns = UnixNowNs();
     unix_start_ns = before_ns + (after_ns - before_ns) / 2;
+    // A scenario's time 0 on the Unix clock, for whoever lines the script up with what the services report
+    // (`ruffini soak` reads this line).
+    spdlog::info("sample 0 is at Unix time {} ns", unix_start_ns);
     next_sample = 0;
     Tick();
     io.run();

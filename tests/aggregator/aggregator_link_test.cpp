@@ -1,6 +1,6 @@
 // The decoder -> aggregator link over a bad network: real ruffini-sim, ruffini-decoder and ruffini-aggregator
 // on 127.0.0.1 (port 0, ports files, stopped by pid), the decoder talking to the aggregator through a TCP
-// proxy (tests/common/tcp_proxy.h) that can freeze the link without closing it.
+// proxy (ruffini/service/tcp_proxy.h) that can freeze the link without closing it.
 //
 // Finding 5 of the review: nothing had keepalive. A decoder whose host vanished without closing its socket
 // held its patch for hours (the aggregator saw a silent but open stream, and refused the restarted decoder as
@@ -22,7 +22,7 @@
 #include "process.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "service_process.h"
-#include "tcp_proxy.h"
+#include "ruffini/service/tcp_proxy.h"
 
 namespace {
 
@@ -86,7 +86,7 @@ class LinkTest : public ::testing::Test {
 // (nominally 1 s to the next ping + 1 s without its ack; the rest is margin for a loaded machine), after which
 // a restarted decoder takes the patch (before, it was refused DUPLICATE_PATCH for hours).
 TEST_F(LinkTest, TheAggregatorDropsAHalfOpenDecoderStreamWithinThreeSeconds) {
-  rt::TcpProxy proxy(grpc_port_);
+  ruffini::service::TcpProxy proxy(grpc_port_);
   ASSERT_GT(proxy.port(), 0);
   rt::Process decoder = StartDecoder(proxy.address(), "decoder");
   ASSERT_TRUE(rt::WaitFor([&] { return Link() == v1::LINK_STATE_HEALTHY; }, 20s, 20ms)) << decoder.stderr_text();
@@ -106,7 +106,7 @@ TEST_F(LinkTest, TheAggregatorDropsAHalfOpenDecoderStreamWithinThreeSeconds) {
 // reconnects (through the proxy: a new connection is forwarded); the patch is healthy again once the
 // aggregator has dropped the old stream too.
 TEST_F(LinkTest, ADecoderBehindAFrozenLinkReconnects) {
-  rt::TcpProxy proxy(grpc_port_);
+  ruffini::service::TcpProxy proxy(grpc_port_);
   ASSERT_GT(proxy.port(), 0);
   rt::Process decoder = StartDecoder(proxy.address(), "decoder");
   ASSERT_TRUE(rt::WaitFor([&] { return Link() == v1::LINK_STATE_HEALTHY; }, 20s, 20ms)) << decoder.stderr_text();

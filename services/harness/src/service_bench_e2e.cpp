@@ -26,6 +26,7 @@
 
 #include "ruffini/error.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
+#include "ruffini/scene_file.h"
 #include "ruffini/service/child.h"
 #include "ruffini/harness/service_bench.h"
 
@@ -95,7 +96,8 @@ struct Record {
 // (system_clock, Unix ns, taken as soon as Read returns).
 class RecordingAggregator final : public v1::Aggregator::Service {
  public:
-  RecordingAggregator() {
+  // robot_name: the scene's name, as a real aggregator names it in HelloAccepted (the decoder refuses another).
+  explicit RecordingAggregator(std::string robot_name) : robot_name_(std::move(robot_name)) {
     records_.reserve(200000);
     grpc::ServerBuilder builder;
     builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port_);
@@ -166,6 +168,7 @@ class RecordingAggregator final : public v1::Aggregator::Service {
         c.mutable_hello_accepted()->set_patch_id(m.patch_id());
         c.mutable_hello_accepted()->set_watchdog_ns(30'000'000);
         c.mutable_hello_accepted()->set_aggregator_instance("ruffini-bench-service");
+        c.mutable_hello_accepted()->set_robot_name(robot_name_);
         stream->Write(c);
       }
     }
@@ -173,6 +176,7 @@ class RecordingAggregator final : public v1::Aggregator::Service {
   }
 
  private:
+  std::string robot_name_;
   int port_ = 0;
   std::unique_ptr<grpc::Server> server_;
   std::mutex mutex_;
@@ -213,7 +217,7 @@ EndToEndRun RunEndToEnd(const ServiceBenchOptions& o, double rate_hz, const std:
 
   EndToEndRun run;
   run.rate_hz = rate_hz;
-  RecordingAggregator aggregator;
+  RecordingAggregator aggregator(LoadSceneFile(o.scene_path).name);
 
   const std::string sim_ports = dir + "/sim.ports", decoder_ports = dir + "/decoder.ports";
   Child sim({sim_exe, "--scene", o.scene_path, "--scenario", o.scenario_path, "--rate-hz", Rate(rate_hz),

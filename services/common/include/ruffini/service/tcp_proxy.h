@@ -1,13 +1,13 @@
 #pragma once
-// Test helper: a TCP proxy on 127.0.0.1 (port 0) in front of one target, to play a bad network between real
-// processes. Every accepted connection gets its own connection to the target, and the proxy can
+// A TCP proxy on 127.0.0.1 (port 0) in front of one target, to play a bad network between real processes (the
+// process tests, and `ruffini soak`, which puts some links through one). Every accepted connection gets its own connection to the target, and the proxy can
 //   - forward (the default),
 //   - Freeze() the connections open now: stop forwarding in both directions without closing anything (a host
 //     that lost power, a dead middlebox; the peers' kernels still hold their sockets open). Connections
 //     accepted later are forwarded.
 //   - Throttle(bytes_per_s): forward at most that many bytes a second in each direction of each connection
 //     (current and later ones; 0: unlimited).
-//   - CloseAll(): close both sides of every connection (the peers see FIN).
+//   - CloseAll(): close both sides of every connection (the peers see FIN); CloseFrozen() only the frozen ones.
 // One thread, poll() on a handful of sockets, header-only, POSIX. Hand-written rather than Boost.Asio: freezing
 // is "stop polling these sockets" and throttling a token bucket in the same loop; Asio would need an async
 // state machine per direction for the same.
@@ -29,7 +29,7 @@
 #include <thread>
 #include <vector>
 
-namespace ruffini::testing {
+namespace ruffini::service {
 
 class TcpProxy {
  public:
@@ -62,6 +62,13 @@ class TcpProxy {
   void Freeze() {
     std::lock_guard lock(mu_);
     for (auto& c : conns_) c->frozen = true;
+  }
+  // Closes the connections Freeze() froze (when the peers have long given up on them: keeps fds bounded).
+  void CloseFrozen() {
+    std::lock_guard lock(mu_);
+    for (auto& c : conns_) {
+      if (c->frozen) c->Close();
+    }
   }
   void Throttle(std::int64_t bytes_per_s) { bytes_per_s_ = bytes_per_s; }
   void CloseAll() {
@@ -164,7 +171,9 @@ class TcpProxy {
           polled.push_back(c.get());
         }
       }
-      poll(fds.data(), fds.size(), 2);  // 2 ms: also the throttle's and the commands' granularity
+      // 2 ms while throttling (the token bucket's granularity); otherwise poll() wakes on traffic and 20 ms
+      // bounds how late a new command (Freeze, Throttle) is seen.
+      poll(fds.data(), fds.size(), bytes_per_s_.load() > 0 ? 2 : 20);
       if (fds[0].revents & POLLIN) Accept();
       const auto now = std::chrono::steady_clock::now();
       const double dt = std::chrono::duration<double>(now - last).count();
@@ -185,6 +194,8 @@ class TcpProxy {
                         Pump(c.server, c.client, c.down, (sev & (POLLIN | POLLHUP | POLLERR)) != 0, limit);
         if (!ok) c.Close();  // one side ended: end the other (a FIN or RST passes through)
       }
+      // Closed connections go (a client that reconnects for hours must not grow the list).
+      std::erase_if(conns_, [](const std::unique_ptr<Conn>& c) { return !c->open(); });
     }
   }
 
@@ -197,4 +208,4 @@ class TcpProxy {
   std::thread thread_;
 };
 
-}  // namespace ruffini::testing
+}  // namespace ruffini::service
