@@ -131,6 +131,29 @@ TEST(Svg, LogXAcrossDecades) {
   EXPECT_THROW((void)Figure("a", "b", "c").SetLogX().SetXRange(0.0, 1.0).Render(), std::invalid_argument);
 }
 
+// Drawn to scale: the path of a unit square's corners (0,0) (1,0) (1,1) spans as many pixels across as up,
+// whatever the figure's shape; without it, a wide figure stretches x.
+TEST(Svg, EqualAspectDrawsToScale) {
+  auto spans = [](bool equal) {
+    Figure fig("square", "x (m)", "z (m)", 900, 300);
+    fig.Add({"", {0, 1, 1}, {0, 0, 1}, "", Series::Style::kLine});
+    fig.SetEqualAspect(equal);
+    const std::string svg = fig.Render();
+    EXPECT_FALSE(ContainsNanOrInf(svg));
+    const auto p = svg.find("<path d=\"M");
+    EXPECT_NE(p, std::string::npos);
+    double x0 = 0, y0 = 0, x1 = 0, y1 = 0, x2 = 0, y2 = 0;
+    EXPECT_EQ(std::sscanf(svg.c_str() + p + 10, "%lf %lf L%lf %lf L%lf %lf", &x0, &y0, &x1, &y1, &x2, &y2), 6)
+        << svg.substr(p, 80);
+    return std::make_pair(std::abs(x1 - x0), std::abs(y2 - y1));
+  };
+  const auto [wide_x, wide_y] = spans(false);
+  EXPECT_GT(wide_x, 2.0 * wide_y);  // the 900 x 300 figure stretches x
+  const auto [x, y] = spans(true);
+  EXPECT_NEAR(x, y, 0.01 * y);
+  EXPECT_GT(y, 100.0);  // and still fills the plot's height
+}
+
 TEST(Svg, DegenerateRanges) {
   Figure fig("flat", "x", "y");
   fig.Add({"", {1, 2, 3}, {5, 5, 5}});

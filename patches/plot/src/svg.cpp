@@ -171,6 +171,7 @@ Figure& Figure::Add(Series s) { return series_.push_back(std::move(s)), *this; }
 Figure& Figure::AddMarker(Marker m) { return markers_.push_back(std::move(m)), *this; }
 Figure& Figure::SetXRange(double lo, double hi) { return x_range_ = std::minmax(lo, hi), *this; }
 Figure& Figure::SetYRange(double lo, double hi) { return y_range_ = std::minmax(lo, hi), *this; }
+Figure& Figure::SetEqualAspect(bool on) { return equal_aspect_ = on, *this; }
 Figure& Figure::SetLogX(bool on) { return log_x_ = on, *this; }
 Figure& Figure::AddHLine(double y, std::string label) { return hlines_.push_back({y, std::move(label)}), *this; }
 Figure& Figure::AddVLine(double x, std::string label) { return vlines_.push_back({x, std::move(label)}), *this; }
@@ -228,7 +229,7 @@ std::string Figure::Render() const {
 
   // ---- layout
   const double top = title_.empty() ? 16.0 : 38.0, bottom = x_label_.empty() ? 34.0 : 52.0;
-  const std::vector<Tick> yticks = LinearTicks(yr.first, yr.second, std::max(2, (height_ - 90) / 50));
+  std::vector<Tick> yticks = LinearTicks(yr.first, yr.second, std::max(2, (height_ - 90) / 50));
   std::size_t ylab = 1;
   for (const Tick& t : yticks) ylab = std::max(ylab, t.label.size());
   const double left = (y_label_.empty() ? 12.0 : 30.0) + 12.0 + kCharW * 12.0 * static_cast<double>(ylab);
@@ -245,6 +246,15 @@ std::string Figure::Render() const {
   }
   const double px0 = left, px1 = std::max(width_ - right, left + 20.0), py0 = top, py1 = height_ - bottom;
   const double pw = px1 - px0, ph = py1 - py0;
+  if (equal_aspect_ && !log_x_) {
+    // One unit as long on both axes: widen the range that has fewer units per pixel about its centre (the y
+    // ticks' labels, which set the left margin, are recomputed; their width barely changes).
+    const double u = std::max((xr.second - xr.first) / pw, (yr.second - yr.first) / ph);
+    const double cx = (xr.first + xr.second) / 2, cy = (yr.first + yr.second) / 2;
+    xr = {cx - u * pw / 2, cx + u * pw / 2};
+    yr = {cy - u * ph / 2, cy + u * ph / 2};
+    yticks = LinearTicks(yr.first, yr.second, std::max(2, (height_ - 90) / 50));
+  }
   const int xtarget = std::max(2, static_cast<int>(pw / 90.0));
   const std::vector<Tick> xticks =
       log_x_ ? LogTicks(xr.first, xr.second, xtarget) : LinearTicks(xr.first, xr.second, xtarget);

@@ -481,7 +481,8 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   }
   {
     // Contact positions in the base frame (side view x-z), the arm drawn at its zero pose for orientation.
-    plot::Figure f("Contact positions on the robot (base frame, side view)", "x (m)", "z (m)", 520, 620);
+    plot::Figure f("Contact positions on the robot (base frame, side view, to scale)", "x (m)", "z (m)", 520, 620);
+    f.SetEqualAspect();
     const auto robot = robot::LoadRobotScene(scene);
     robot::Data fk;
     std::vector<double> q(robot.model.num_dof(), 0.0);

@@ -48,6 +48,9 @@ class Figure {
   Figure& SetXRange(double lo, double hi);
   Figure& SetYRange(double lo, double hi);
   Figure& SetLogX(bool on = true);  // log10 x axis
+  // Drawn to scale: a unit of x as long as a unit of y (the ranges widen about their centres to fit the plot
+  // area; ignored on a log x axis). For positions in space.
+  Figure& SetEqualAspect(bool on = true);
   Figure& AddHLine(double y, std::string label);  // dashed reference lines
   Figure& AddVLine(double x, std::string label);
 
@@ -67,6 +70,7 @@ class Figure {
   std::vector<Marker> markers_;
   std::optional<std::pair<double, double>> x_range_, y_range_;
   bool log_x_ = false;
+  bool equal_aspect_ = false;
   std::vector<RefLine> hlines_, vlines_;
 };
 
