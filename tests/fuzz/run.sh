@@ -32,7 +32,7 @@ while (($#)); do
 done
 case "$target" in
   hyperion) corpus=$here/corpus; max_len=4096 ;;
-  core) corpus=$here/core_corpus; max_len=8192 ;;
+  core) corpus=$here/core_corpus; max_len=2048 ;;  # up to about 400 steps; the longest seed is 1474 bytes
   safety_client) corpus=$here/corpus_safety_client; max_len=512 ;;
   *) echo "unknown target '$target' (hyperion, core or safety_client)" >&2; exit 2 ;;
 esac
