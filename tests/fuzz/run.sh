@@ -13,6 +13,9 @@
 # The seed corpus is copied to a scratch directory first, so it is never modified;
 # crashing inputs are kept under $RUFFINI_FUZZ_WORK/run.*/artifacts (a
 # passing run's directory is removed).
+# The whole script is one compound command, read before it runs: editing the file during a long campaign
+# cannot change what the running shell does next.
+{
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
@@ -91,3 +94,5 @@ if ((rc != 0 || crashes != 0)); then
   exit 1
 fi
 rm -rf "$work"
+exit 0
+}
