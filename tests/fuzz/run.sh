@@ -59,6 +59,8 @@ if [[ -n "$seed" ]]; then args+=(-seed="$seed"); fi
 
 seeds=$(ls "$work/corpus" | wc -l)
 started=$(date -u +%s)
+# The tree as it is when the run starts (the binary's sources, unless it is stale).
+commit="$(git -C "$root" rev-parse --short HEAD 2>/dev/null || echo unknown)$(git -C "$root" diff --quiet HEAD -- tests/fuzz patches services 2>/dev/null || echo ' (with local changes)')"
 set +e
 "$bin" "${args[@]}" "$work/corpus" >"$work/log.txt" 2>&1
 rc=$?
@@ -78,7 +80,7 @@ if [[ -n "$report" ]]; then
     echo "target:      $target ($bin)"
     echo "date:        $(date -u -d "@$started" '+%Y-%m-%d %H:%M:%S UTC')"
     echo "machine:     $(uname -srm), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | sed 's/.*: //'), load average at the end $(cut -d' ' -f1-3 /proc/loadavg)"
-    echo "commit:      $(git -C "$root" rev-parse --short HEAD 2>/dev/null || echo unknown)$(git -C "$root" diff --quiet HEAD -- tests/fuzz patches services 2>/dev/null || echo ' (with local changes)')"
+    echo "commit:      $commit"
     echo "command:     nice $(nice) $bin ${args[*]} CORPUS (CORPUS: a copy of $corpus, $seeds inputs)"
     echo "executions:  ${execs:-unknown}"
     echo "wall time:   ${wall} s ($(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$work/log.txt" | grep -o '[0-9]*$' || echo '?') executions/s)"
