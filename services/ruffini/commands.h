@@ -11,5 +11,6 @@ void RegisterBenchServiceCommand(CLI::App& app);
 void RegisterBenchAggregatorCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
 void RegisterResetCommand(CLI::App& app);
+void RegisterCoverageCommands(CLI::App& app);  // sensitivity, check-scene
 
 }  // namespace ruffini::cli

@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   ruffini::cli::RegisterBenchAggregatorCommand(app);
   ruffini::cli::RegisterDemoCommand(app);
   ruffini::cli::RegisterResetCommand(app);
+  ruffini::cli::RegisterCoverageCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& e) {
