@@ -54,6 +54,14 @@ TEST(CobotScene, SafetySection) {
   EXPECT_EQ(c.input.position_tolerance_r_deg, 5.0);
   EXPECT_EQ(c.input.sample_rate_hz, 0.0);  // the cobot scene pins no rate: ruffini demo --rate-hz may vary it
   EXPECT_THAT(c.input.source, HasSubstr("time_skew: "));
+  // The coverage it states (docs/coverage.md): issue 16's press factor, and every accepted band says it is not
+  // covered and lies on every patch (so scenes generated from this safety section keep it).
+  EXPECT_EQ(c.coverage.press_factor, 1.5);
+  EXPECT_FALSE(c.coverage.accepted_uncovered.empty());
+  for (const auto& b : c.coverage.accepted_uncovered) {
+    EXPECT_THAT(b.source, HasSubstr("NOT covered")) << b.name;
+    EXPECT_EQ(b.patch, "") << b.name;
+  }
   // The policy takes it as it is.
   const Policy policy(c);
   EXPECT_EQ(policy.patch_count(), 4u);
