@@ -62,6 +62,11 @@ std::string MakeScene(const std::string& dir, const std::string& coverage) {
   };
   replace("spec: ../../config/patches/forearm.yaml", "spec: " + kSrc + "/config/patches/forearm.yaml");
   replace("model: ../../config/models/forearm.rmodel", "model: mapped.rmodel");
+  // The template's own coverage section (the shipped model's bands) gives way to this test's.
+  const auto from = text.find("  # The cobot scene's coverage"), to = text.find("  link_layer:");
+  EXPECT_NE(from, std::string::npos);
+  EXPECT_NE(to, std::string::npos);
+  if (from != std::string::npos && to != std::string::npos && from < to) text.erase(from, to - from);
   replace("  silence_deadline_ms: 200\n", "  silence_deadline_ms: 200\n" + coverage);
   std::ofstream(dir + "/scene.yaml") << text;
   return dir + "/scene.yaml";
