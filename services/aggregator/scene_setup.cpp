@@ -80,8 +80,9 @@ std::string Describe(const aggregate::Setup& setup) {
       if (c.accepted_bands_size() == 0) out << ", no band accepted as uncovered)";
       else {
         out << "; accepted uncovered:";
-        for (const auto& b : c.accepted_bands()) {
-          out << " " << b.name() << " on " << (b.patch_id().empty() ? "every patch" : b.patch_id());
+        for (int k = 0; k < c.accepted_bands_size(); ++k) {
+          const auto& b = c.accepted_bands(k);
+          out << (k ? ", " : " ") << b.name() << " on " << (b.patch_id().empty() ? "every patch" : b.patch_id());
         }
         out << ")";
       }
