@@ -1,8 +1,11 @@
 #include "scene_setup.h"
 
+#include <cmath>
+#include <cstdio>
 #include <random>
 #include <sstream>
 
+#include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
 #include "ruffini/robot/scene.h"
 #include "ruffini/safety/scene.h"
@@ -49,6 +52,10 @@ aggregate::Setup SetupFromScene(const std::string& scene_path) {
     }
     setup.patches.push_back(std::move(e));
   }
+  SceneCoverage coverage = CoverageOfScene(scene_path);
+  if (!coverage.refusal.empty()) throw InputError(scene_path + ": " + coverage.refusal);
+  setup.coverage = std::move(coverage.regions);
+  for (std::size_t i = 0; i < setup.patches.size(); ++i) setup.patches[i].sensitivity = std::move(coverage.maps[i]);
   setup.instance = service::InstanceName();
   setup.robot_name = file.name;
   setup.run_id = DrawRunId();
@@ -64,9 +71,159 @@ std::string Describe(const aggregate::Setup& setup) {
     if (setup.patches[i].mount) out << " on " << setup.patches[i].mount->link;
   }
   out << "); regions:";
-  for (const auto& r : setup.safety.regions) out << " " << r.name << " > " << r.threshold_n << " N stops;";
+  for (const auto& r : setup.safety.regions) {
+    out << " " << r.name << " > " << r.threshold_n << " N stops";
+    for (const v1::RegionCoverage& c : setup.coverage) {
+      if (c.region() != r.name) continue;
+      out << " (guaranteed from " << c.guaranteed_threshold_n() << " N: a press of " << c.stop_force_n()
+          << " N stops on its covered surface, " << c.covered_points() << " of " << c.points() << " map points";
+      if (c.accepted_bands_size() == 0) out << ", no band accepted as uncovered)";
+      else {
+        out << "; accepted uncovered:";
+        for (int k = 0; k < c.accepted_bands_size(); ++k) {
+          const auto& b = c.accepted_bands(k);
+          out << (k ? ", " : " ") << b.name() << " on " << (b.patch_id().empty() ? "every patch" : b.patch_id());
+        }
+        out << ")";
+      }
+    }
+    out << ";";
+  }
   out << " robot name '" << setup.robot_name << "', run id " << std::hex << setup.run_id << std::dec << ";";
   out << " robot: " << (setup.robot ? setup.robot->name() + " (" + std::to_string(setup.robot->num_dof()) + " joints)" : "none");
+  return out.str();
+}
+
+namespace {
+
+std::string Num(double v) {
+  if (std::isinf(v)) return "inf";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f", v);
+  return buf;
+}
+
+}  // namespace
+
+SceneCoverage CoverageOfScene(const std::string& scene_path) {
+  const SceneFile file = LoadSceneFile(scene_path);
+  const safety::Config config = safety::ConfigFromScene(file);
+  const twin::Scene scene = twin::LoadScene(scene_path);
+  const safety::CoverageConfig& cov = config.coverage;
+  SceneCoverage out;
+  std::vector<v1::DecoderModel> models(scene.patches.size());
+  std::vector<bool> has_model(scene.patches.size(), false);
+  for (std::size_t i = 0; i < scene.patches.size(); ++i) {
+    const twin::ScenePatch& p = scene.patches[i];
+    if (!p.model_path.empty()) {
+      models[i] = decode::LoadModel(p.model_path);
+      has_model[i] = true;
+    }
+    out.maps.emplace_back(models[i].sensitivity().begin(), models[i].sensitivity().end());
+  }
+  std::vector<decode::UncoveredBand> bands;
+  for (const auto& b : cov.accepted_uncovered) {
+    for (const twin::ScenePatch& p : scene.patches) {
+      if (!b.patch.empty() && p.name != b.patch) continue;
+      if (b.y_max_mm > p.spec.extent_y_mm || b.r_max_deg > p.spec.extent_r_deg) {
+        throw InputError(scene_path + ": safety.coverage.accepted_uncovered '" + b.name + "' reaches beyond patch " +
+                         p.name + "'s surface (Y 0.." + Num(p.spec.extent_y_mm) + " mm, R 0.." +
+                         Num(p.spec.extent_r_deg) + " deg)");
+      }
+    }
+    bands.push_back({b.name, b.patch, b.y_min_mm, b.y_max_mm, b.r_min_deg, b.r_max_deg, b.source});
+  }
+  std::string refusal;
+  for (const safety::RegionConfig& r : config.regions) {
+    std::vector<decode::CoveragePatch> patches;
+    for (std::size_t i = 0; i < scene.patches.size(); ++i) {
+      if (config.patches[i].region != r.name) continue;
+      decode::CoveragePatch cp;
+      cp.id = scene.patches[i].name;
+      cp.maps = has_model[i] ? &models[i].sensitivity() : nullptr;
+      cp.extent_y_mm = scene.patches[i].spec.extent_y_mm;
+      cp.extent_r_deg = scene.patches[i].spec.extent_r_deg;
+      patches.push_back(cp);
+    }
+    decode::RegionGuarantee g = decode::GuaranteeRegion(patches, bands, r.threshold_n, cov.press_factor);
+    v1::RegionCoverage rc;
+    rc.set_region(r.name);
+    rc.set_threshold_n(r.threshold_n);
+    rc.set_press_factor(static_cast<float>(cov.press_factor));
+    rc.set_map_level_n(static_cast<float>(g.map_level_n));
+    rc.set_stop_force_n(static_cast<float>(g.stop_force_n));
+    rc.set_guaranteed_threshold_n(static_cast<float>(g.guaranteed_threshold_n));
+    rc.set_points(g.points);
+    rc.set_covered_points(g.covered_points);
+    std::size_t k = 0;  // g.bands: the bands on this region's patches, in the scene's order
+    for (const decode::UncoveredBand& b : bands) {
+      bool mine = false;
+      for (const auto& p : patches) mine = mine || b.On(p.id);
+      if (!mine) continue;
+      v1::AcceptedBand* ab = rc.add_accepted_bands();
+      ab->set_name(b.name);
+      ab->set_patch_id(b.patch);
+      ab->set_y_min_mm(b.y_min_mm);
+      ab->set_y_max_mm(b.y_max_mm);
+      ab->set_r_min_deg(b.r_min_deg);
+      ab->set_r_max_deg(b.r_max_deg);
+      ab->set_source(b.source);
+      ab->set_points(g.bands[k].points);
+      ab->set_uncovered_points(g.bands[k].uncovered_points);
+      ++k;
+    }
+    if (!g.ok()) {
+      std::string why = "region '" + r.name + "' threshold " + Num(r.threshold_n) + " N is ";
+      if (!g.unmapped.empty()) {
+        why += "not guaranteed: the model of patch";
+        for (const auto& id : g.unmapped) why += " " + id;
+        why += " has no sensitivity map at or above " + Num(r.threshold_n) +
+               " N (measure one with `ruffini sensitivity`, or accept the whole patch as uncovered)";
+      } else {
+        why += "below what its patches guarantee, " + Num(g.guaranteed_threshold_n) + " N (" +
+               std::to_string(g.uncovered.size()) + " of " + std::to_string(g.covered_points) +
+               " covered map points need more than " + Num(cov.press_factor) + " x " + Num(r.threshold_n) +
+               " N to be reported above " + Num(g.map_level_n) + " N; the worst needs " + Num(g.stop_force_n) +
+               " N); raise the threshold or name the uncovered bands in safety.coverage.accepted_uncovered "
+               "(`ruffini check-scene --points` lists them)";
+      }
+      refusal += (refusal.empty() ? "" : "; ") + why;
+    }
+    out.regions.push_back(std::move(rc));
+    out.guarantees.push_back(std::move(g));
+  }
+  out.refusal = refusal;
+  return out;
+}
+
+std::string DescribeCoverage(const SceneCoverage& c, bool points) {
+  std::ostringstream out;
+  for (std::size_t i = 0; i < c.regions.size(); ++i) {
+    const v1::RegionCoverage& r = c.regions[i];
+    const decode::RegionGuarantee& g = c.guarantees[i];
+    out << "region " << r.region() << ": threshold " << Num(r.threshold_n()) << " N, press factor "
+        << Num(r.press_factor()) << "; maps of level " << Num(r.map_level_n()) << " N; guaranteed threshold "
+        << Num(r.guaranteed_threshold_n()) << " N (every press of " << Num(r.stop_force_n()) << " N or more is "
+        << "reported above the level on the covered surface: " << r.covered_points() << " of " << r.points()
+        << " map points): " << (g.ok() ? "GUARANTEED" : "NOT GUARANTEED") << "\n";
+    for (const auto& id : g.unmapped) out << "  patch " << id << ": no sensitivity map at or above the threshold\n";
+    for (const v1::AcceptedBand& b : r.accepted_bands()) {
+      out << "  accepted uncovered band " << b.name() << " on " << (b.patch_id().empty() ? "every patch" : b.patch_id()) << ": Y " << Num(b.y_min_mm()) << ".."
+          << Num(b.y_max_mm()) << " mm, R " << Num(b.r_min_deg()) << ".." << Num(b.r_max_deg()) << " deg, "
+          << b.points() << " map points, " << b.uncovered_points() << " of them weak (" << b.source() << ")\n";
+    }
+    if (!g.uncovered.empty()) {
+      out << "  " << g.uncovered.size() << " covered map points need more than " << Num(r.press_factor()) << " x "
+          << Num(r.threshold_n()) << " N" << (points ? ":" : " (--points lists them)") << "\n";
+      if (points) {
+        for (const auto& p : g.uncovered) {
+          out << "    " << p.patch << " Y " << Num(p.y_mm) << " mm R " << Num(p.r_deg) << " deg: " << Num(p.min_force_n)
+              << " N\n";
+        }
+      }
+    }
+  }
+  if (!c.refusal.empty()) out << "refused: " << c.refusal << "\n";
   return out.str();
 }
 

@@ -5,16 +5,34 @@
 #include <string>
 
 #include "ruffini/aggregate/core.h"
+#include "ruffini/decode/sensitivity.h"
 
 namespace ruffini::aggregator {
 
 // Throws InputError naming the file, the key and what was expected (a scene without a `safety:` section
-// cannot run an aggregator: it names no thresholds).
+// cannot run an aggregator: it names no thresholds), and when a region's threshold is below what its patches'
+// sensitivity maps guarantee outside the scene's accepted uncovered bands (CoverageOfScene's refusal).
 // Setup.robot_name is the scene's `name`; Setup.run_id a fresh DrawRunId().
 aggregate::Setup SetupFromScene(const std::string& scene_path);
 // A random nonzero 64-bit run id (std::random_device), drawn once per aggregator start.
 std::uint64_t DrawRunId();
-// One line for the log: patches, regions and thresholds, robot.
+// One line for the log: patches, regions and thresholds (with their guarantees and accepted bands), robot.
 std::string Describe(const aggregate::Setup& setup);
+
+// What a scene's regions can guarantee (docs/coverage.md): each patch's model's sensitivity maps (the map of
+// the smallest level at or above its region's threshold), less the scene's `safety.coverage.accepted_uncovered`
+// bands. Not real-time (reads every model file once).
+struct SceneCoverage {
+  std::vector<v1::RegionCoverage> regions;             // the scene's region order (AggregatorStatus.coverage)
+  std::vector<decode::RegionGuarantee> guarantees;     // the same order, with the uncovered points
+  std::vector<std::vector<v1::SensitivityMap>> maps;   // per scene patch, its model's maps
+  std::string refusal;                                 // empty: every region's threshold is guaranteed
+};
+// Throws InputError for a malformed scene or model, or a band beyond its patch's extent; a threshold below
+// its guarantee is not thrown but said in `refusal`.
+SceneCoverage CoverageOfScene(const std::string& scene_path);
+// Lines for people (the log, `ruffini check-scene`): per region its threshold, the guarantee, the accepted
+// bands; with `points`, every covered grid point that misses the guarantee.
+std::string DescribeCoverage(const SceneCoverage& coverage, bool points = false);
 
 }  // namespace ruffini::aggregator

@@ -610,6 +610,7 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
   h.set_decoder_version(kVersion);
   h.set_decoder_instance(service::InstanceName());
   h.set_grating_count(static_cast<std::uint32_t>(kGratings));
+  *h.mutable_sensitivity() = s.model.sensitivity();  // where the model is weak (docs/coverage.md)
   v1::DecoderConfig& dc = *h.mutable_decoder_config();
   const auto& pc = s.pipeline_config;
   dc.set_scalar(s.choice.use_double ? "double" : "float");

@@ -12,5 +12,6 @@ void RegisterBenchAggregatorCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
 void RegisterResetCommand(CLI::App& app);
 void RegisterSoakCommand(CLI::App& app);
+void RegisterCoverageCommands(CLI::App& app);  // sensitivity, check-scene
 
 }  // namespace ruffini::cli

@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   ruffini::cli::RegisterDemoCommand(app);
   ruffini::cli::RegisterResetCommand(app);
   ruffini::cli::RegisterSoakCommand(app);
+  ruffini::cli::RegisterCoverageCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& e) {

@@ -54,6 +54,14 @@ TEST(CobotScene, SafetySection) {
   EXPECT_EQ(c.input.position_tolerance_r_deg, 5.0);
   EXPECT_EQ(c.input.sample_rate_hz, 0.0);  // the cobot scene pins no rate: ruffini demo --rate-hz may vary it
   EXPECT_THAT(c.input.source, HasSubstr("time_skew: "));
+  // The coverage it states (docs/coverage.md): issue 16's press factor, and every accepted band says it is not
+  // covered and lies on every patch (so scenes generated from this safety section keep it).
+  EXPECT_EQ(c.coverage.press_factor, 1.5);
+  EXPECT_FALSE(c.coverage.accepted_uncovered.empty());
+  for (const auto& b : c.coverage.accepted_uncovered) {
+    EXPECT_THAT(b.source, HasSubstr("NOT covered")) << b.name;
+    EXPECT_EQ(b.patch, "") << b.name;
+  }
   // The policy takes it as it is.
   const Policy policy(c);
   EXPECT_EQ(policy.patch_count(), 4u);
@@ -209,6 +217,53 @@ TEST_F(SafetyScene, ContactReleaseAndInputLimitsAreValidated) {
   EXPECT_THAT(Message(p), HasSubstr("'safety.decoders.config_sha256' (ABC) must be a SHA-256 in lower-case hex"));
   p = Write("arm", "arm", "    - {name: arm, threshold_n: 2, source: x, release: {hold_ms: 5, source: x, extra: 1}}\n");
   EXPECT_THAT(Message(p), HasSubstr("'safety.regions[0].release.extra' is not a known key here"));
+}
+
+TEST_F(SafetyScene, CoverageAndItsAcceptedBands) {
+  Config c = ConfigFromScene(Write("arm", "arm", kArm));
+  EXPECT_EQ(c.coverage.press_factor, 1.5);  // issue 16's target, also without the section
+  EXPECT_TRUE(c.coverage.accepted_uncovered.empty());
+  c = ConfigFromScene(Write("arm", "arm", kArm,
+                            "  coverage:\n    press_factor: 2\n    source: why\n    accepted_uncovered:\n"
+                            "      - {name: end, patch: b, y_mm: [140, 150], r_deg: [0, 145], source: no fibre there}\n"));
+  EXPECT_EQ(c.coverage.press_factor, 2.0);
+  EXPECT_EQ(c.coverage.source, "why");
+  ASSERT_EQ(c.coverage.accepted_uncovered.size(), 1u);
+  const auto& b = c.coverage.accepted_uncovered[0];
+  EXPECT_EQ(b.name, "end");
+  EXPECT_EQ(b.patch, "b");
+  EXPECT_EQ(b.y_min_mm, 140.0);
+  EXPECT_EQ(b.y_max_mm, 150.0);
+  EXPECT_EQ(b.r_min_deg, 0.0);
+  EXPECT_EQ(b.r_max_deg, 145.0);
+  EXPECT_EQ(b.source, "no fibre there");
+  // Without `patch:` a band lies on every patch.
+  c = ConfigFromScene(Write("arm", "arm", kArm,
+                            "  coverage:\n    source: why\n    accepted_uncovered:\n"
+                            "      - {name: ends, y_mm: [0, 5], r_deg: [0, 145], source: every patch's elbow end}\n"));
+  ASSERT_EQ(c.coverage.accepted_uncovered.size(), 1u);
+  EXPECT_EQ(c.coverage.accepted_uncovered[0].patch, "");
+}
+
+TEST_F(SafetyScene, CoverageIsValidated) {
+  const auto band = [&](const std::string& text) {
+    return Write("arm", "arm", kArm, "  coverage:\n    source: why\n    accepted_uncovered:\n      - " + text + "\n");
+  };
+  std::string p = Write("arm", "arm", kArm, "  coverage: {press_factor: 1.5}\n");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.coverage.source' is missing"));
+  p = Write("arm", "arm", kArm, "  coverage: {press_factor: 0.5, source: x}\n");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.coverage.press_factor' (0.5) must lie inside"));
+  p = band("{name: e, patch: c, y_mm: [0, 1], r_deg: [0, 1], source: x}");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.coverage.accepted_uncovered[0].patch' (c) names no patch of the scene"));
+  p = band("{name: e, patch: a, y_mm: [5, 1], r_deg: [0, 1], source: x}");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.coverage.accepted_uncovered[0].y_mm'"));
+  EXPECT_THAT(Message(p), HasSubstr("must be [min, max] with min <= max"));
+  p = band("{name: e, patch: a, y_mm: [0, 1], r_deg: [0, 1]}");
+  EXPECT_THAT(Message(p), HasSubstr("'safety.coverage.accepted_uncovered[0].source' is missing: say why this band"));
+  p = Write("arm", "arm", kArm, "  coverage:\n    source: why\n    accepted_uncovered:\n"
+                                "      - {name: e, patch: a, y_mm: [0, 1], r_deg: [0, 1], source: x}\n"
+                                "      - {name: e, patch: b, y_mm: [0, 1], r_deg: [0, 1], source: x}\n");
+  EXPECT_THAT(Message(p), HasSubstr("is used by two bands"));
 }
 
 TEST_F(SafetyScene, RegionAndSafetyGoTogether) {

@@ -762,7 +762,9 @@ v1::AggregatorStatus Core::Status(std::int64_t now_ns) const {
     *p->mutable_hello() = l.hello;
     *p->mutable_last_heartbeat() = l.heartbeat;
     *p->mutable_last_fault() = l.fault;
+    for (const v1::SensitivityMap& m : setup_.patches[i].sensitivity) *p->add_sensitivity() = m;
   }
+  for (const v1::RegionCoverage& c : setup_.coverage) *st.add_coverage() = c;
   // Age by arrival on the aggregator's own clock (the controller's clock is not this one): never negative.
   st.set_joint_state_age_ns(joint_arrival_ns_ < 0 ? -1 : std::max<std::int64_t>(0, now_ns - joint_arrival_ns_));
   if (!joints_.empty()) st.set_joint_state_t_ns(joints_.back().t_ns);

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "ruffini/decode/sensitivity.h"
 #include "ruffini/error.h"
 
 namespace ruffini::decode {
@@ -184,6 +185,12 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
       }
       if (!(std::isfinite(u.position_floor_mm2()) && u.position_floor_mm2() >= 0)) {
         throw InputError("uncertainty position_floor_mm2 must be finite and >= 0");
+      }
+    }
+    for (int k = 0; k < m.sensitivity_size(); ++k) {
+      ValidateSensitivity(m.sensitivity(k), "sensitivity[" + std::to_string(k) + "]");
+      if (k > 0 && !(m.sensitivity(k).level_n() > m.sensitivity(k - 1).level_n())) {
+        throw InputError("sensitivity maps must be in ascending level_n, one per level");
       }
     }
   } catch (const InputError& e) {

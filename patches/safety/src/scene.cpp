@@ -125,6 +125,37 @@ Config ConfigFromScene(const SceneFile& scene) {
     l.source = Source(*m, "these budgets");
     m->Finish();
   }
+  if (auto m = s.MapOr("coverage")) {
+    CoverageConfig& cov = c.coverage;
+    cov.press_factor = m->NumberOr("press_factor", cov.press_factor, 1.0, 100.0);
+    cov.source = Source(*m, "this press factor");
+    if (m->Has("accepted_uncovered")) {
+      for (YamlReader& b : m->Sequence("accepted_uncovered")) {
+        CoverageConfig::Band band;
+        band.name = b.String("name");
+        for (const auto& other : cov.accepted_uncovered) {
+          if (other.name == band.name) b.Fail("name", "is used by two bands; band names must be unique");
+        }
+        band.patch = b.StringOr("patch", "");  // none: the band lies on every patch of the scene
+        bool known = band.patch.empty();
+        for (const SceneFilePatch& p : scene.patches) known = known || p.name == band.patch;
+        if (!known) b.Fail("patch", "names no patch of the scene");
+        const auto range = [&](const char* key, double& lo, double& hi) {
+          const std::vector<double> v = b.Numbers(key, 0.0, 1000.0);
+          if (v.size() != 2 || !(v[0] <= v[1])) b.Fail(key, "must be [min, max] with min <= max (patch frame)");
+          lo = v[0];
+          hi = v[1];
+        };
+        range("y_mm", band.y_min_mm, band.y_max_mm);
+        range("r_deg", band.r_min_deg, band.r_max_deg);
+        if (!b.Has("source")) b.Fail("source", "is missing: say why this band may stay uncovered");
+        band.source = b.String("source");
+        b.Finish();
+        cov.accepted_uncovered.push_back(std::move(band));
+      }
+    }
+    m->Finish();
+  }
   s.Finish();
 
   for (const SceneFilePatch& p : scene.patches) {

@@ -51,6 +51,8 @@ struct PatchExpectation {
   std::optional<robot::PatchMount> mount;  // where it sits on the robot (none: not placed)
   double extent_y_mm = 150.0;    // the spec's surface: Y in 0..extent_y_mm, R in 0..extent_r_deg
   double extent_r_deg = 145.0;
+  // The sensitivity maps of the model the scene names (GetStatus shows them; empty: none or no model).
+  std::vector<v1::SensitivityMap> sensitivity;
 };
 
 // A live stream silent for more than this many watchdogs (its patch's silence deadline) is replaced by a
@@ -66,6 +68,8 @@ struct Setup {
   std::string instance = "aggregator";
   std::uint64_t run_id = 0;        // this aggregator run (nonzero; the service draws it with std::random_device)
   std::string robot_name;          // the scene's `name`
+  // Per region, what its patches' sensitivity maps guarantee (computed at load; GetStatus shows it).
+  std::vector<v1::RegionCoverage> coverage;
 };
 
 // Joint-state rejections (counted, logged by the service; a rejected state is not used).

@@ -160,6 +160,20 @@ struct PatchConfig {
   std::int64_t silence_deadline_ns = 30'000'000;  // silent longer than this (strictly) is a fault: 3 heartbeats
 };
 
+// What the scene requires of its patches' sensitivity maps (the scene's `safety.coverage`; docs/coverage.md):
+// a press of press_factor x a region's threshold must stop anywhere on the region's covered surface, which is
+// its patches' surface less the accepted uncovered bands. Checked at load, never per frame.
+struct CoverageConfig {
+  double press_factor = 1.5;  // the issue 16 target: grid presses at 1.5x the threshold stop
+  std::string source;         // the scene's `source:` (empty: the default)
+  struct Band {
+    std::string name, patch;  // unique name; the scene's patch id (empty: every patch of the scene)
+    double y_min_mm = 0, y_max_mm = 0, r_min_deg = 0, r_max_deg = 0;  // patch frame, inclusive
+    std::string source;       // why the scene accepts it
+  };
+  std::vector<Band> accepted_uncovered;
+};
+
 struct Config {
   std::vector<RegionConfig> regions;
   std::vector<PatchConfig> patches;             // at least one; ids unique
@@ -181,6 +195,7 @@ struct Config {
     int error_limit = 2;                            // ... and how many errors in it latch FAULT kLinkErrors
     std::string source;                             // the scene's `source:` (empty: these defaults)
   } link{};
+  CoverageConfig coverage{};
 };
 
 // Throws InputError naming the field and the value: "safety.patches[2].id ('forearm') is a duplicate".

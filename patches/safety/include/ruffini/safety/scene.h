@@ -19,6 +19,11 @@
 //     time_skew: {max_ms: 2000, source: ...}                        # frames and joint states vs arrival
 //     position_tolerance: {y_mm: 5, r_deg: 5, source: ...}          # beyond the spec's extents
 //     decoders: {sample_rate_hz: 1000, config_sha256: ..., source: ...}  # hello expectations
+//     coverage:                      # CoverageConfig: what the patches' sensitivity maps must guarantee
+//       press_factor: 1.5            # a press of 1.5 x a region's threshold stops on its covered surface
+//       source: ...
+//       accepted_uncovered:          # named parts of patches outside the guarantee, each with its reason
+//         - {name: wrist-end, patch: forearm_a, y_mm: [130, 150], r_deg: [0, 145], source: ...}
 //
 // Times are written in ms and kept in ns. joint_states_required is true exactly when the scene names a robot.
 // Every region needs a `source:` (FACTS.md: ISO/TS 15066 values vary between sources, so a number carries

@@ -1,0 +1,78 @@
+#pragma once
+// Sensitivity maps (ruffini.v1.SensitivityMap, issue 16: "the decoder knows where it is weak") and what a
+// region's patches can guarantee with them (docs/coverage.md).
+//
+// A map, measured for one level L (a region threshold), gives at each grid point p of a patch the smallest
+// force F(p) of a ladder from which on presses are reported above L reliably. The aggregator stops on a
+// decoded force above the region's threshold T; a map of level L >= T is conservative for T (reported above
+// L is reported above T). A region guarantees T when, over its covered surface (its patches' grid points
+// outside the bands the scene accepts as uncovered), every F(p) <= press_factor x T: a press that strong
+// stops anywhere there. The smallest threshold it can guarantee is max F(p) / press_factor.
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "ruffini/v1/model.pb.h"
+
+namespace ruffini::decode {
+
+// Shapes (one value per grid point), ascending grids and ladder, finite positive level, reliability in
+// (0, 1], min_force_n > 0 (or +infinity), location errors >= 0 or NaN. Throws InputError naming `where`.
+void ValidateSensitivity(const v1::SensitivityMap& map, const std::string& where);
+
+// The map of the smallest level at or above threshold_n, or nullptr when there is none.
+const v1::SensitivityMap* MapForThreshold(const google::protobuf::RepeatedPtrField<v1::SensitivityMap>& maps,
+                                          double threshold_n);
+
+// A part of a patch a scene accepts as not covered (safety.coverage.accepted_uncovered).
+struct UncoveredBand {
+  std::string name;
+  std::string patch;  // empty: every patch
+  double y_min_mm = 0, y_max_mm = 0, r_min_deg = 0, r_max_deg = 0;
+  std::string source;
+  [[nodiscard]] bool On(const std::string& patch_id) const noexcept { return patch.empty() || patch == patch_id; }
+  [[nodiscard]] bool Contains(double y_mm, double r_deg) const noexcept {
+    return y_mm >= y_min_mm && y_mm <= y_max_mm && r_deg >= r_min_deg && r_deg <= r_max_deg;
+  }
+};
+
+// One patch of a region, with its model's maps (none: the model has no map).
+struct CoveragePatch {
+  std::string id;
+  const google::protobuf::RepeatedPtrField<v1::SensitivityMap>* maps = nullptr;
+  double extent_y_mm = 150.0, extent_r_deg = 145.0;  // the spec's surface
+};
+
+struct BandCount {
+  std::string name;
+  std::uint32_t points = 0, uncovered_points = 0;
+};
+
+// A grid point on the covered surface that misses the guarantee (reliable force above press_factor x T).
+struct UncoveredPoint {
+  std::string patch;
+  double y_mm = 0, r_deg = 0;
+  float min_force_n = 0;
+};
+
+struct RegionGuarantee {
+  double threshold_n = 0, press_factor = 0;
+  double map_level_n = std::numeric_limits<double>::quiet_NaN();  // NaN: some patch has no usable map
+  double stop_force_n = std::numeric_limits<double>::infinity();   // max reliable force over the covered surface
+  double guaranteed_threshold_n = std::numeric_limits<double>::infinity();
+  std::uint32_t points = 0, covered_points = 0;
+  std::vector<BandCount> bands;          // the accepted bands on this region's patches, in the scene's order
+  std::vector<std::string> unmapped;     // patches whose model has no map at or above the threshold
+  std::vector<UncoveredPoint> uncovered; // covered points missing the guarantee (what a band would have to accept)
+  // The scene's threshold is guaranteed: no unmapped patch (unless accepted whole) and threshold_n >=
+  // guaranteed_threshold_n.
+  [[nodiscard]] bool ok() const noexcept { return unmapped.empty() && threshold_n >= guaranteed_threshold_n; }
+};
+
+// Computes a region's guarantee. A patch with no map at or above threshold_n is unmapped unless one band
+// accepts all of its extent. map_level_n is the largest level used over the region's patches.
+RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const std::vector<UncoveredBand>& bands,
+                                double threshold_n, double press_factor);
+
+}  // namespace ruffini::decode

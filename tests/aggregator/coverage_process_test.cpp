@@ -1,0 +1,172 @@
+// Scene guarantees with the real processes (docs/coverage.md): a one-patch scene whose model carries a
+// sensitivity map made here (every point reliable at 2 N except one at 5 N), so the figures are this test's,
+// not a measurement's. ruffini-aggregator refuses the scene below its guarantee, loads it once the scene
+// accepts the weak point's band and lists the band in its log and GetStatus, which carries the patch's map;
+// a real ruffini-decoder's hello carries its model's map. `ruffini check-scene` says the same.
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "process.h"
+#include "ruffini/decode/model_io.h"
+#include "ruffini/v1/aggregator.grpc.pb.h"
+#include "service_process.h"
+
+namespace {
+
+using namespace std::chrono_literals;
+namespace v1 = ruffini::v1;
+namespace rt = ruffini::testing;
+namespace fs = std::filesystem;
+
+const std::string kSrc = RUFFINI_SOURCE_DIR;
+
+// The map: Y {2, 75, 148} x R {3, 100}; 2 N everywhere but (75, 100): 5 N. Level 1.5 N.
+v1::SensitivityMap Map() {
+  v1::SensitivityMap m;
+  m.set_level_n(1.5f);
+  m.set_reliability(0.95f);
+  for (double y : {2.0, 75.0, 148.0}) m.add_y_mm(y);
+  for (double r : {3.0, 100.0}) m.add_r_deg(r);
+  for (int k = 0; k < 6; ++k) {
+    m.add_min_force_n(k == 3 ? 5.0f : 2.0f);
+    m.add_location_error_mm(1.0f + static_cast<float>(k));
+  }
+  for (float f : {1.0f, 2.0f, 5.0f, 200.0f}) m.add_forces_n(f);
+  m.set_presses(20);
+  m.set_probe_radius_mm(5.5);
+  m.set_source("coverage_process_test");
+  return m;
+}
+
+// A folder with the model (the shipped networks, this test's map) and a one-patch scene; `coverage` is the
+// scene's safety.coverage section (empty: none).
+std::string MakeScene(const std::string& dir, const std::string& coverage) {
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  v1::DecoderModel model = ruffini::decode::LoadModel(kSrc + "/config/models/forearm.rmodel");
+  model.clear_sensitivity();
+  *model.add_sensitivity() = Map();
+  ruffini::decode::SaveModel(dir + "/mapped.rmodel", model);
+  std::ifstream in(kSrc + "/tests/fault/one-patch.yaml");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto replace = [&](const std::string& from, const std::string& to) {
+    const auto at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    text.replace(at, from.size(), to);
+  };
+  replace("spec: ../../config/patches/forearm.yaml", "spec: " + kSrc + "/config/patches/forearm.yaml");
+  replace("model: ../../config/models/forearm.rmodel", "model: mapped.rmodel");
+  // The template's own coverage section (the shipped model's bands) gives way to this test's.
+  const auto from = text.find("  # The cobot scene's coverage"), to = text.find("  link_layer:");
+  EXPECT_NE(from, std::string::npos);
+  EXPECT_NE(to, std::string::npos);
+  if (from != std::string::npos && to != std::string::npos && from < to) text.erase(from, to - from);
+  replace("  silence_deadline_ms: 200\n", "  silence_deadline_ms: 200\n" + coverage);
+  std::ofstream(dir + "/scene.yaml") << text;
+  return dir + "/scene.yaml";
+}
+
+const std::string kBand =
+    "  coverage:\n"
+    "    press_factor: 1.5\n"
+    "    source: issue 16's target\n"
+    "    accepted_uncovered:\n"
+    "      - {name: middle, patch: forearm, y_mm: [70, 80], r_deg: [90, 110], source: the test's weak point}\n";
+
+v1::AggregatorStatus Status(const std::string& address) {
+  auto stub = v1::Aggregator::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + 3s);
+  v1::AggregatorStatus st;
+  EXPECT_TRUE(stub->GetStatus(&ctx, v1::GetStatusRequest{}, &st).ok());
+  return st;
+}
+
+TEST(CoverageProcess, ASceneBelowItsGuaranteeIsRefused) {
+  const std::string dir = (fs::current_path() / "coverage_refused").string();
+  const std::string scene = MakeScene(dir, "");
+  rt::Process agg({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", scene, "--listen", "127.0.0.1:0", "--metrics",
+                   "127.0.0.1:0"},
+                  dir);
+  EXPECT_EQ(agg.WaitExit(10s), 1);
+  const std::string err = agg.stderr_text();
+  EXPECT_NE(err.find("region 'forearm' threshold 1.50 N is below what its patches guarantee, 3.33 N"), std::string::npos)
+      << err;
+  EXPECT_NE(err.find("1 of 6 covered map points need more than 1.50 x 1.50 N"), std::string::npos) << err;
+  // check-scene says the same, and names the point.
+  rt::Process check({RUFFINI_EXE, "check-scene", scene, "--points"}, dir);
+  EXPECT_EQ(check.WaitExit(30s), 1);
+  EXPECT_NE(check.stdout_text().find("NOT GUARANTEED"), std::string::npos) << check.stdout_text();
+  EXPECT_NE(check.stdout_text().find("forearm Y 75.00 mm R 100.00 deg: 5.00 N"), std::string::npos) << check.stdout_text();
+}
+
+TEST(CoverageProcess, AcceptedBandsMakeItLoadAndAreListedInTheLogAndStatusWithEveryMapAndTheHello) {
+  const std::string base = (fs::current_path() / "coverage_accepted").string();
+  const std::string scene = MakeScene(base, kBand);
+  rt::Process check({RUFFINI_EXE, "check-scene", scene}, base);
+  EXPECT_EQ(check.WaitExit(30s), 0) << check.stdout_text() << check.stderr_text();
+  EXPECT_NE(check.stdout_text().find("accepted uncovered band middle on forearm"), std::string::npos) << check.stdout_text();
+
+  int grpc_port = 0, sim_port = 0, metrics = 0;
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", scene, "--listen", "127.0.0.1:0",
+                                        "--metrics", "127.0.0.1:0"},
+                                       base + "/aggregator", "grpc", grpc_port);
+  const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
+  ASSERT_TRUE(rt::WaitFor([&] { return agg.stderr_text().find("accepted uncovered: middle on forearm") != std::string::npos; }, 5s))
+      << agg.stderr_text();
+  EXPECT_NE(agg.stderr_text().find("guaranteed from 1.33333 N"), std::string::npos) << agg.stderr_text();
+  v1::AggregatorStatus st = Status(address);
+  ASSERT_EQ(st.coverage_size(), 1);
+  const v1::RegionCoverage& c = st.coverage(0);
+  EXPECT_EQ(c.region(), "forearm");
+  EXPECT_FLOAT_EQ(c.threshold_n(), 1.5f);
+  EXPECT_FLOAT_EQ(c.stop_force_n(), 2.0f);
+  EXPECT_NEAR(c.guaranteed_threshold_n(), 2.0 / 1.5, 1e-6);
+  EXPECT_EQ(c.points(), 6u);
+  EXPECT_EQ(c.covered_points(), 5u);
+  ASSERT_EQ(c.accepted_bands_size(), 1);
+  EXPECT_EQ(c.accepted_bands(0).name(), "middle");
+  EXPECT_EQ(c.accepted_bands(0).patch_id(), "forearm");
+  EXPECT_EQ(c.accepted_bands(0).points(), 1u);
+  EXPECT_EQ(c.accepted_bands(0).uncovered_points(), 1u);
+  EXPECT_EQ(c.accepted_bands(0).source(), "the test's weak point");
+  ASSERT_EQ(st.patches_size(), 1);
+  ASSERT_EQ(st.patches(0).sensitivity_size(), 1);
+  EXPECT_EQ(st.patches(0).sensitivity(0).SerializeAsString(), Map().SerializeAsString());
+  EXPECT_EQ(st.patches(0).hello().sensitivity_size(), 0);  // no decoder yet
+
+  // A decoder: its hello carries its model's map, and GetStatus shows it.
+  rt::Process sim = rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", scene, "--scenario", kSrc + "/tests/fault/quiet.yaml", "--rate-hz", "1000", "--command-port", "0",
+                                        "--stream-port", "0"},
+                                       base + "/sim", "stream", sim_port);
+  rt::Process decoder = rt::StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", scene, "--patch", "forearm",
+                                            "--interrogator", "127.0.0.1:" + std::to_string(sim_port), "--aggregator",
+                                            address, "--metrics", "127.0.0.1:0", "--rate-hz", "1000"},
+                                           base + "/decoder", "metrics", metrics);
+  ASSERT_TRUE(rt::WaitFor([&] { return Status(address).patches(0).hello().sensitivity_size() > 0; }, 20s, 50ms))
+      << agg.stderr_text() << decoder.stderr_text();
+  st = Status(address);
+  ASSERT_EQ(st.patches(0).hello().sensitivity_size(), 1);
+  EXPECT_EQ(st.patches(0).hello().sensitivity(0).SerializeAsString(), Map().SerializeAsString());
+}
+
+TEST(CoverageProcess, ABandBeyondItsPatchIsAClearError) {
+  const std::string dir = (fs::current_path() / "coverage_beyond").string();
+  std::string band = kBand;
+  band.replace(band.find("r_deg: [90, 110]"), 16, "r_deg: [90, 200]");
+  const std::string scene = MakeScene(dir, band);
+  rt::Process agg({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", scene, "--listen", "127.0.0.1:0", "--metrics",
+                   "127.0.0.1:0"},
+                  dir);
+  EXPECT_EQ(agg.WaitExit(10s), 1);
+  EXPECT_NE(agg.stderr_text().find("'middle' reaches beyond patch forearm's surface"), std::string::npos)
+      << agg.stderr_text();
+}
+
+}  // namespace
