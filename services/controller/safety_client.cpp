@@ -147,8 +147,13 @@ SafetyMonitor::Action SafetyMonitor::OnStreamOpened(SteadyClock::time_point now)
   last_evidence_ = now;
   clear_streak_ = 0;
   ++stats_.streams_opened;
-  // A new stream learns its sender's clock offset anew; the error-rate latch and the run's newest seq are
-  // kept (a re-created stream must not forget errors, nor accept a replay of older states of the same run).
+  // A new stream keeps what the client knows: the error-rate latch, the run's newest seq (a re-created stream
+  // must not accept a replay of older states of the same run), the runs a newer run replaced, and the
+  // aggregator run's clock offset (a delay that halted the old stream is not the new stream's "on time":
+  // review of issue 15, F2). Only a new run's first state starts a clock anew.
+  if (link_ && link_->aggregator_run_id() != 0 && link_->freshness().learned()) {
+    remembered_clock_ = {link_->aggregator_run_id(), link_->freshness().offset_ns(), link_->freshness().last_arrival_ns()};
+  }
   link_.reset();
   return {};
 }
@@ -156,12 +161,26 @@ SafetyMonitor::Action SafetyMonitor::OnStreamOpened(SteadyClock::time_point now)
 // Every received state passes here first: the safety layer (patches/channel: CRC, addressee, run, sequence,
 // freshness; docs/safety-channel.md), then nothing else. A discarded state halts.
 StateVerdict SafetyMonitor::CheckState(const v1::SafetyState& s, SteadyClock::time_point arrival) {
-  if (!link_) link_.emplace(config_.link, config_.robot_name);
+  if (!link_) {
+    link_.emplace(config_.link, config_.robot_name);
+    if (remembered_clock_.run_id != 0) {
+      link_->RememberSender(remembered_clock_.run_id, remembered_clock_.offset_ns, remembered_clock_.last_arrival_ns);
+    }
+  }
   if (!rate_) rate_.emplace(config_.link.error_rate);
   const std::int64_t arrival_ns =
       std::chrono::duration_cast<std::chrono::nanoseconds>(arrival.time_since_epoch()).count();
   channel::Verdict v = link_->Receive(s, arrival_ns);
-  if (v.use && s.aggregator_run_id() == seq_run_ && s.seq() < seq_last_) {
+  const bool dead_run =
+      std::find(dead_runs_.begin(), dead_runs_.end(), s.aggregator_run_id()) != dead_runs_.end();
+  if (v.use && dead_run) {
+    // A state of an aggregator run a newer run has replaced (a recording replayed after a restart: review of
+    // issue 15, F3): no live aggregator sends it. An insertion.
+    stats_.link_errors.Count(channel::Error::kInsertion);
+    v.use = false;
+    v.error = true;
+    v.kind = channel::Error::kInsertion;
+  } else if (v.use && s.aggregator_run_id() == seq_run_ && s.seq() < seq_last_) {
     // An older state of the same run on a new stream (a replay): an incorrect sequence. The same seq is
     // allowed: a new subscription's first state repeats the one in force.
     stats_.link_errors.Count(channel::Error::kIncorrectSequence);
@@ -175,6 +194,10 @@ StateVerdict SafetyMonitor::CheckState(const v1::SafetyState& s, SteadyClock::ti
   if (v.error && v.kind != channel::Error::kLoss && rate_->Record(arrival_ns)) link_latched_ = true;
   if (v.use && !link_latched_) {
     if (s.aggregator_run_id() != seq_run_) {
+      if (seq_run_ != 0) {
+        dead_runs_.push_back(seq_run_);  // replaced by a newer run: never believed again
+        if (dead_runs_.size() > 64) dead_runs_.erase(dead_runs_.begin());
+      }
       seq_run_ = s.aggregator_run_id();
       seq_last_ = s.seq();
     } else {

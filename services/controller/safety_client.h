@@ -218,6 +218,11 @@ class SafetyMonitor {
   bool halt_latched_ = false;              // link_latched_ when the current halt was told (a new latch is told)
   std::uint64_t seq_run_ = 0;              // the aggregator run of seq_last_ ...
   std::uint64_t seq_last_ = 0;             // ... and the newest seq accepted from it, on any stream
+  std::vector<std::uint64_t> dead_runs_;   // runs a newer run replaced (the newest 64): their states are refused
+  struct RememberedClock {
+    std::uint64_t run_id = 0;
+    std::int64_t offset_ns = 0, last_arrival_ns = 0;
+  } remembered_clock_;                     // the newest run's clock offset, kept across streams
   SafetyStats stats_;
 };
 

@@ -213,6 +213,25 @@ TEST_F(PatchLink, DelayLatchesAndTheContentIsStillUsed) {
   EXPECT_NEAR(static_cast<double>(v.age_ns), 21e6, 10e3) << "less the allowed 200 ppm creep";
 }
 
+// Review of issue 15, F1: the stream a delay ended hands its sender's clock to the next stream of the same
+// sender run; the delayed hello that opens it is late, not the new "on time". Another sender run (a restarted
+// decoder) starts anew.
+TEST_F(PatchLink, TheNextStreamOfTheSameSenderKeepsTheLearnedClock) {
+  Start();
+  const std::int64_t offset = check.freshness().offset_ns(), last = check.freshness().last_arrival_ns();
+  PatchLinkCheck next{LinkConfig{.freshness = {.budget_ns = 20 * kMs}, .error_rate = {.window_ns = 1000 * kMs}},
+                      kAggRun, "forearm_a"};
+  next.RememberSender(kDecRun, offset, last);
+  const Verdict v = next.Receive(Msg(1, 500 * kMs, true), 500 * kMs + 200'000 + 300 * kMs);  // 300 ms on the wire
+  EXPECT_EQ(v.kind, Error::kDelay);
+  EXPECT_NEAR(static_cast<double>(v.age_ns), 300e6, 1e6);
+
+  PatchLinkCheck other{LinkConfig{.freshness = {.budget_ns = 20 * kMs}, .error_rate = {.window_ns = 1000 * kMs}},
+                       kAggRun, "forearm_a"};
+  other.RememberSender(kDecRun + 1, offset, last);  // not this sender's run
+  EXPECT_FALSE(other.Receive(Msg(1, 500 * kMs, true), 500 * kMs + 200'000 + 300 * kMs).error);
+}
+
 TEST_F(PatchLink, Insertion) {
   Start();
   v1::PatchMessage m = Msg(4, 3 * kMs);

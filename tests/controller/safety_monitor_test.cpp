@@ -511,6 +511,62 @@ TEST(SafetyMonitorLink, TheLatchIsToldAndTheAcknowledgementSaysWhetherOneWasHeld
 
 // Review (helper-5) finding 2: a replay of older states of the same aggregator run on a new stream (STOP in
 // force at a newer seq) is an incorrect sequence, never three clean CLEARs.
+// A state sent at `sent`, arriving at `arrival` (a delayed link).
+rc::SafetyMonitor::Action FeedLate(rc::SafetyMonitor& m, v1::SafetyState s, rc::SteadyClock::time_point sent,
+                                   rc::SteadyClock::time_point arrival) {
+  s.set_sender_steady_ns(std::chrono::duration_cast<std::chrono::nanoseconds>(sent.time_since_epoch()).count());
+  ruffini::channel::Seal(s);
+  return m.OnState(s, arrival);
+}
+
+// Review of issue 15, F2: a delay that halted one stream must not become the next stream's "on time". The
+// client re-creates its stream after the halt; the aggregator run is the same, so its clock offset is kept and
+// the still-delayed states are still late.
+TEST(SafetyMonitorLink, ADelayIsNotRelearnedAsOnTimeOnTheNextStreamOfTheSameRun) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 100;
+  auto t = ClearUp(m, kT0, 1, seq);
+  // From here every state arrives 80 ms after it was sent (budget 20 ms).
+  EXPECT_EQ(FeedLate(m, State(kClear, 1, ++seq), t, t + 80ms).halt.reason, rc::HaltReason::kLate);
+  t += 80ms;
+  m.OnStreamEnded("CANCELLED", t += 1ms);
+  m.OnStreamOpened(t += 1ms);
+  for (int i = 0; i < 6; ++i) {
+    t += 10ms;
+    EXPECT_NE(FeedLate(m, State(kClear, 1, ++seq), t - 80ms, t).kind, Kind::kClear) << i;
+  }
+  EXPECT_TRUE(m.halted());
+  // A new aggregator run (a restart) starts its clock anew: on time from its first state.
+  m.AcknowledgeLinkErrors();
+  m.OnStreamEnded("UNAVAILABLE", t += 1ms);
+  m.OnStreamOpened(t += 1ms);
+  std::uint64_t seq2 = 1;
+  for (int i = 0; i < 5; ++i) Feed(m, State(kClear, 1, seq2++, 43), t += 10ms);
+  EXPECT_FALSE(m.halted());
+}
+
+// Review of issue 15, F3: after a restart, a recording of the older run replayed (the live run in FAULT)
+// never releases the robot: a run a newer run replaced is never believed again.
+TEST(SafetyMonitorLink, ARecordedOlderRunReplayedAfterARestartNeverReleases) {
+  rc::SafetyMonitor m(kConfig, kT0);
+  m.OnStreamOpened(kT0);
+  std::uint64_t seq = 100;
+  auto t = ClearUp(m, kT0, 2, seq);  // run 42, CLEAR epoch 2
+  m.OnStreamEnded("UNAVAILABLE", t += 1ms);
+  m.OnStreamOpened(t += 1ms);
+  std::uint64_t seq_b = 1;
+  Feed(m, State(kFault, 1, seq_b++, 43), t += 10ms);  // the restarted aggregator: FAULT (start-up)
+  Feed(m, State(kFault, 1, seq_b++, 43), t += 10ms);
+  EXPECT_TRUE(m.halted());
+  m.OnStreamEnded("CANCELLED", t += 1ms);
+  m.OnStreamOpened(t += 1ms);
+  // Run 42's CLEARs, sealed and fresh-looking, with seqs it never sent before.
+  for (int i = 0; i < 8; ++i) EXPECT_NE(Feed(m, State(kClear, 2, ++seq, 42), t += 10ms).kind, Kind::kClear) << i;
+  EXPECT_TRUE(m.halted());
+  EXPECT_GE(m.Stats(t).link_errors[ruffini::channel::Error::kInsertion], 1u);
+}
+
 TEST(SafetyMonitorLink, AReplayOfOlderStatesOnANewStreamIsRefused) {
   rc::SafetyMonitor m(kConfig, kT0);
   m.OnStreamOpened(kT0);

@@ -84,6 +84,7 @@ Core::Core(Setup setup, std::int64_t now_ns)
     throw InputError(std::string("aggregator setup: safety.link_layer: ") + e.what());
   }
   link_errors_.resize(setup_.patches.size());
+  sender_clock_.resize(setup_.patches.size());
   links_.resize(setup_.patches.size());
   if (setup_.robot) {
     q_scratch_.resize(setup_.robot->num_dof());
@@ -237,8 +238,21 @@ Core::Reply Core::OnPatchMessage(int stream, const v1::PatchMessage& m, std::int
 
   // The safety layer first (docs/safety-channel.md): integrity, identity, addressee, sequence, freshness.
   // The stream's first message fixes the patch id it may speak for.
-  if (!s.check) s.check.emplace(link_config_, setup_.run_id, m.patch_id());
+  if (!s.check) {
+    s.check.emplace(link_config_, setup_.run_id, m.patch_id());
+    // What the patch's earlier streams learned of this sender's clock (review of issue 15, F1: a delay that
+    // ended a stream must not become the next stream's "on time").
+    const std::int32_t known = policy_.FindPatch(m.patch_id());
+    if (known >= 0 && sender_clock_[static_cast<std::size_t>(known)].sender_run_id != 0) {
+      const SenderClock& c = sender_clock_[static_cast<std::size_t>(known)];
+      s.check->RememberSender(c.sender_run_id, c.offset_ns, c.last_arrival_ns);
+    }
+  }
   const channel::Verdict v = s.check->Receive(m, now_ns);
+  if (s.patch >= 0 && s.check->freshness().learned()) {
+    sender_clock_[static_cast<std::size_t>(s.patch)] = {s.check->sender_run_id(), s.check->freshness().offset_ns(),
+                                                        s.check->freshness().last_arrival_ns()};
+  }
   if (v.error) {
     // The checker counted it per stream; the Core keeps the per-patch totals the metrics show.
     CountLinkError(s, v.kind);

@@ -139,6 +139,9 @@ Verdict PatchLinkCheck::Receive(const v1::PatchMessage& m, std::int64_t arrival_
   if (m.sender_run_id() == 0) return Discard(Error::kInsertion, arrival_steady_ns);
   if (sender_run_id_ == 0) {
     sender_run_id_ = m.sender_run_id();
+    if (remembered_.sender_run_id == sender_run_id_ && !freshness_.learned()) {
+      freshness_.Seed(remembered_.offset_ns, remembered_.last_arrival_ns);
+    }
   } else if (m.sender_run_id() != sender_run_id_) {
     return Discard(Error::kInsertion, arrival_steady_ns);
   }
@@ -185,6 +188,9 @@ Verdict StateLinkCheck::Receive(const v1::SafetyState& s, std::int64_t arrival_s
   if (s.aggregator_run_id() == 0) return Discard(Error::kInsertion, arrival_steady_ns);
   if (run_id_ == 0) {
     run_id_ = s.aggregator_run_id();
+    if (remembered_.run_id == run_id_ && !freshness_.learned()) {
+      freshness_.Seed(remembered_.offset_ns, remembered_.last_arrival_ns);
+    }
   } else if (s.aggregator_run_id() != run_id_) {
     return Discard(Error::kInsertion, arrival_steady_ns);
   }

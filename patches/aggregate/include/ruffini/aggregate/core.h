@@ -231,6 +231,13 @@ class Core {
   Setup setup_;
   channel::LinkConfig link_config_;
   std::vector<channel::ErrorCounts> link_errors_;
+  // Per patch: the newest sender clock its streams learned (sender run, offset, last arrival), kept across
+  // streams so that a reconnecting decoder of the same run is held to the same clock.
+  struct SenderClock {
+    std::uint64_t sender_run_id = 0;
+    std::int64_t offset_ns = 0, last_arrival_ns = 0;
+  };
+  std::vector<SenderClock> sender_clock_;
   channel::ErrorCounts link_errors_unbound_;
   safety::Policy policy_;
   safety::Data data_;

@@ -73,6 +73,14 @@ class FreshnessCheck {
   [[nodiscard]] const FreshnessConfig& config() const noexcept { return config_; }
   [[nodiscard]] bool learned() const noexcept { return learned_; }
   [[nodiscard]] std::int64_t offset_ns() const noexcept { return offset_ns_; }
+  [[nodiscard]] std::int64_t last_arrival_ns() const noexcept { return last_arrival_ns_; }
+  // Starts from what an earlier link of the same sender run learned (its offset and its last arrival), instead
+  // of taking the first message as on time: a delay that ended the earlier link is still seen on this one.
+  void Seed(std::int64_t offset_ns, std::int64_t last_arrival_ns) noexcept {
+    learned_ = true;
+    offset_ns_ = offset_ns;
+    last_arrival_ns_ = last_arrival_ns;
+  }
 
  private:
   FreshnessConfig config_;
@@ -132,6 +140,12 @@ struct Verdict {
 class PatchLinkCheck {
  public:
   PatchLinkCheck(LinkConfig config, std::uint64_t aggregator_run_id, std::string patch_id);
+  // What an earlier stream of this patch learned of its sender's clock: used when this stream's sender run is
+  // the same (a decoder reconnecting, e.g. after the delay ended its stream), ignored otherwise (a restarted
+  // decoder has a new run and a new clock origin). Call before the first Receive.
+  void RememberSender(std::uint64_t sender_run_id, std::int64_t offset_ns, std::int64_t last_arrival_ns) noexcept {
+    remembered_ = {sender_run_id, offset_ns, last_arrival_ns};
+  }
   Verdict Receive(const v1::PatchMessage& m, std::int64_t arrival_steady_ns) noexcept;
   [[nodiscard]] const ErrorCounts& counts() const noexcept { return counts_; }
   [[nodiscard]] const FreshnessCheck& freshness() const noexcept { return freshness_; }
@@ -142,6 +156,10 @@ class PatchLinkCheck {
   std::uint64_t aggregator_run_id_;
   std::string patch_id_;
   std::uint64_t sender_run_id_ = 0;  // learned from the stream's first message
+  struct Remembered {
+    std::uint64_t sender_run_id = 0;
+    std::int64_t offset_ns = 0, last_arrival_ns = 0;
+  } remembered_;
   SequenceCheck seq_;
   FreshnessCheck freshness_;
   ErrorRate rate_;
@@ -157,14 +175,25 @@ class PatchLinkCheck {
 class StateLinkCheck {
  public:
   StateLinkCheck(LinkConfig config, std::string robot_name);
+  // What an earlier stream learned of an aggregator run's clock: used when this stream's run is that run (a
+  // re-created stream), so that a delay that halted the earlier stream is not this one's "on time". Call
+  // before the first Receive.
+  void RememberSender(std::uint64_t run_id, std::int64_t offset_ns, std::int64_t last_arrival_ns) noexcept {
+    remembered_ = {run_id, offset_ns, last_arrival_ns};
+  }
   Verdict Receive(const v1::SafetyState& s, std::int64_t arrival_steady_ns) noexcept;
   [[nodiscard]] const ErrorCounts& counts() const noexcept { return counts_; }
   [[nodiscard]] std::uint64_t aggregator_run_id() const noexcept { return run_id_; }
+  [[nodiscard]] const FreshnessCheck& freshness() const noexcept { return freshness_; }
 
  private:
   Verdict Discard(Error e, std::int64_t arrival_steady_ns) noexcept;
   std::string robot_name_;
   std::uint64_t run_id_ = 0;  // learned from the stream's first good state
+  struct Remembered {
+    std::uint64_t run_id = 0;
+    std::int64_t offset_ns = 0, last_arrival_ns = 0;
+  } remembered_;
   SequenceCheck seq_;
   FreshnessCheck freshness_;
   ErrorRate rate_;
