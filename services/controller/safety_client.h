@@ -14,7 +14,10 @@
 //   - a CLEAR carries another stop_epoch than the state before it in the same aggregator run (a stop/clear
 //     cycle happened in states this client skipped),
 //   - a CLEAR comes from a new aggregator run (aggregator_run_id or aggregator_start_t_ns changed: a restart,
-//     or another aggregator answering at this address).
+//     or another aggregator answering at this address),
+//   - the safety layer discards the state (CheckState: CRC, run, sequence, freshness; docs/safety-channel.md),
+//     and, once two such errors fall within the error-rate window, every state until an operator calls
+//     AcknowledgeLinkErrors().
 // After every halt, whatever its reason, it may move again only after states_before_clear CLEAR states in a
 // row of one aggregator run on one live stream, each within heartbeat_timeout of the state before it. The
 // client starts halted.
