@@ -40,6 +40,9 @@ void RegisterSoakCommand(CLI::App& app) {
       ->check(CLI::Range(0, 16))->capture_default_str();
   cmd->add_option("--stop-bound-ms", o->stop_bound_ms, "True crossing to halt at every controller, ms")
       ->check(CLI::Range(1.0, 10000.0))->capture_default_str();
+  cmd->add_option("--unexplained-faults-fail", o->unexplained_faults_fail,
+                  "An unexplained FAULT fails the run (false: counted and reported only, e.g. on a shared CI machine)")
+      ->capture_default_str();
   cmd->add_option("--freshness-budget-ms", o->freshness_budget_ms,
                   "Freshness budget for the decoders' queues and the aggregator (0: the services' defaults)")
       ->check(CLI::Range(0, 10000))->capture_default_str();

@@ -29,6 +29,7 @@
 #include "ruffini/service/common.h"
 #include "ruffini/service/tls.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
+#include "run_common.h"
 
 namespace ruffini::harness {
 namespace {
@@ -169,12 +170,6 @@ struct Event {
   std::string observed;
 };
 
-std::string Fmt(const char* f, double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
-
 bool WaitUntil(const std::function<bool()>& cond, std::chrono::milliseconds timeout,
                std::chrono::milliseconds poll = 2ms) {
   const auto deadline = Clock::now() + timeout;
@@ -185,24 +180,10 @@ bool WaitUntil(const std::function<bool()>& cond, std::chrono::milliseconds time
   }
 }
 
-const char* StateName(v1::SafetyState::State s) {
-  switch (s) {
-    case v1::SafetyState::STATE_CLEAR: return "CLEAR";
-    case v1::SafetyState::STATE_STOP: return "STOP";
-    case v1::SafetyState::STATE_FAULT: return "FAULT";
-    default: return "UNSPECIFIED";
-  }
-}
-
 }  // namespace
 
 DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::string&)>& log) {
-  for (const char* exe : {"ruffini-sim", "ruffini-decoder", "ruffini-aggregator", "ruffini-controller"}) {
-    if (!fs::exists(fs::path(o.bin_dir) / exe)) {
-      throw InputError(std::string(exe) + " is not next to this executable (" + o.bin_dir +
-                       "); build every target (cmake --workflow --preset release)");
-    }
-  }
+  RequireServiceExecutables(o.bin_dir);
   const SceneFile scene = LoadSceneFile(o.scene_path);
   if (!scene.robot || !scene.safety) {
     throw InputError(o.scene_path + ": the demo needs a scene with a robot and a safety section (e.g. "

@@ -34,6 +34,10 @@ struct SoakOptions {
   double stop_bound_ms = 100.0;     // true crossing of the threshold to a halt at every controller
   double sample_every_s = 5.0;      // RSS and fd samples
   // Budgets the decoders and the aggregator get (--freshness-budget-ms, --patch-freshness-ms); 0: theirs.
+  // An unexplained FAULT fails the run (the default). ctest's 40-second run counts and reports them but passes:
+  // on a shared 2-core CI machine a process starved for 30 ms faults safely, and that says nothing about the
+  // channel; lost stops, false clears and crashes always fail.
+  bool unexplained_faults_fail = true;
   int freshness_budget_ms = 0;  // also the controllers' (ruffini-controller --freshness-budget-ms)
 };
 
@@ -44,7 +48,7 @@ struct SoakResult {
   int unexplained_faults = 0;
   int crashes = 0;           // a process that exited without being told to, or did not exit cleanly
   int stops_without_press = 0;  // STOP epochs with no press above the threshold under way (reported)
-  bool pass = false;         // lost_stops, false_clears, unexplained_faults and crashes all 0
+  bool pass = false;         // lost_stops, false_clears and crashes 0, and unexplained_faults 0 unless tolerated
   std::string report_path;
 };
 
