@@ -76,12 +76,14 @@ if [[ -n "$keep" ]]; then mkdir -p "$keep" && cp "$work/corpus"/* "$keep/"; fi
 if [[ -n "$report" ]]; then
   # libFuzzer's last status line (e.g. "#10000000 DONE cov: 812 ft: 3547 corp: 903/154Kb ...").
   status=$(grep -E '^#[0-9]+' "$work/log.txt" | tail -n 1 || true)
+  # Paths in the report relative to the repository, so that a reader elsewhere can rerun the command.
+  rel() { echo "${1//$root\//}"; }
   {
-    echo "target:      $target ($bin)"
+    echo "target:      $target ($(rel "$bin"))"
     echo "date:        $(date -u -d "@$started" '+%Y-%m-%d %H:%M:%S UTC')"
     echo "machine:     $(uname -srm), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | sed 's/.*: //'), load average at the end $(cut -d' ' -f1-3 /proc/loadavg)"
     echo "commit:      $commit"
-    echo "command:     nice $(nice) $bin ${args[*]} CORPUS (CORPUS: a copy of $corpus, $seeds inputs)"
+    echo "command:     nice $(nice) $(rel "$bin") $(rel "${args[*]}") CORPUS (CORPUS: a copy of $(rel "$corpus"), $seeds inputs)"
     echo "executions:  ${execs:-unknown}"
     echo "wall time:   ${wall} s ($(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$work/log.txt" | grep -o '[0-9]*$' || echo '?') executions/s)"
     echo "crashes:     $crashes (libFuzzer exit status $rc)"
