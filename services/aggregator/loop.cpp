@@ -86,9 +86,9 @@ void AggregatorServer::Impl::CopyStats() {
   const auto& c = core->counters();
   stats.messages = c.messages;
   stats.hellos_accepted = c.hellos_accepted;
-  std::uint64_t refused = 0;
-  for (auto v : c.hellos_refused) refused += v;
-  stats.hellos_refused = refused;
+  for (std::size_t r = 0; r < stats.hellos_refused.size() && r < c.hellos_refused.size(); ++r) {
+    stats.hellos_refused[r].store(c.hellos_refused[r], std::memory_order_relaxed);
+  }
   stats.protocol_errors = c.protocol_errors;
   for (std::size_t i = 0; i <= stats.patch_ids.size(); ++i) {
     const channel::ErrorCounts& ec = i < stats.patch_ids.size() ? core->link_errors()[i] : core->link_errors_unbound();

@@ -1,5 +1,6 @@
 // The aggregator's Prometheus metrics: a collectable that reads Stats (atomics the loop updates) at scrape time.
 #include <prometheus/metric_family.h>
+#include <cctype>
 #include <prometheus/metric_type.h>
 
 #include "server_impl.h"
@@ -53,7 +54,21 @@ class StatsCollectable final : public prometheus::Collectable {
     }
     one("ruffini_aggregator_patch_messages_total", "PatchMessages received.", MetricType::Counter, u(s_.messages));
     one("ruffini_aggregator_hellos_accepted_total", "Decoder hellos accepted.", MetricType::Counter, u(s_.hellos_accepted));
-    one("ruffini_aggregator_hellos_refused_total", "Decoder hellos refused.", MetricType::Counter, u(s_.hellos_refused));
+    {
+      // One series per refusal reason (the contract's HelloRefusal, lower case without its prefix).
+      MetricFamily f{"ruffini_aggregator_hellos_refused_total", "Decoder hellos refused, by reason.",
+                     MetricType::Counter, {}};
+      for (int r = v1::HelloRefusal_MIN + 1; r <= v1::HelloRefusal_MAX; ++r) {
+        if (!v1::HelloRefusal_IsValid(r)) continue;
+        std::string reason = v1::HelloRefusal_Name(static_cast<v1::HelloRefusal>(r)).substr(sizeof("HELLO_REFUSAL_") - 1);
+        for (char& ch : reason) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+        ClientMetric m;
+        m.label.push_back({"reason", reason});
+        m.counter.value = u(s_.hellos_refused[static_cast<std::size_t>(r)]);
+        f.metric.push_back(std::move(m));
+      }
+      out.push_back(std::move(f));
+    }
     one("ruffini_aggregator_protocol_errors_total", "Connect streams ended for a protocol error.", MetricType::Counter,
         u(s_.protocol_errors));
     {

@@ -181,7 +181,8 @@ using ContactsReactor = WatchReactor<v1::ContactSet>;
 struct Stats {
   std::atomic<int> state{3};
   std::atomic<std::uint64_t> stop_epoch{1}, seq{0}, stops{0}, faults{0}, resets_accepted{0}, resets_refused{0};
-  std::atomic<std::uint64_t> messages{0}, hellos_accepted{0}, hellos_refused{0}, protocol_errors{0};
+  std::atomic<std::uint64_t> messages{0}, hellos_accepted{0}, protocol_errors{0};
+  std::array<std::atomic<std::uint64_t>, v1::HelloRefusal_ARRAYSIZE> hellos_refused{};  // by v1::HelloRefusal
   std::atomic<std::uint64_t> joint_accepted{0}, joint_rejected{0};
   std::atomic<std::uint64_t> subscriber_drops{0};
   // Refused for who the caller is (docs/security.md): an RPC its role may not call, a hello for another

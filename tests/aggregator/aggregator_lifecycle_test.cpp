@@ -69,10 +69,18 @@ bool LoopSilent(v1::Aggregator::Stub& stub, std::chrono::milliseconds within) {
   return stub.GetStatus(&ctx, v1::GetStatusRequest{}, &st).error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
 }
 
-// A sample of a Prometheus text scrape ("name value"); -1 when absent.
-double Sample(const std::string& text, const std::string& series) {
-  const auto at = text.find("\n" + series + " ");
-  return at == std::string::npos ? -1.0 : std::stod(text.substr(at + series.size() + 2));
+
+// The sum of every series of a metric (all its label values); -1 when it has none.
+double SumOf(const std::string& text, const std::string& metric) {
+  double sum = -1;
+  std::size_t at = 0;
+  while ((at = text.find("\n" + metric, at)) != std::string::npos) {
+    at += 1 + metric.size();
+    if (at >= text.size() || (text[at] != ' ' && text[at] != '{')) continue;
+    const auto value = text.find(' ', text.find_first_of(" }", at));
+    sum = std::max(sum, 0.0) + std::stod(text.substr(value + 1));
+  }
+  return sum;
 }
 
 // The median gap between the arrivals of `n` messages of a fresh watch call (reader: the call's reader).
@@ -197,7 +205,7 @@ TEST(AggregatorLifecycle, SigtermExitsWithinTwoSecondsAfterFiftyAbandonedRefused
   double refused = 0;
   ASSERT_TRUE(rt::WaitFor([&] {
     const double before = refused;
-    refused = Sample(rt::Scrape(metrics), "ruffini_aggregator_hellos_refused_total");
+    refused = SumOf(rt::Scrape(metrics), "ruffini_aggregator_hellos_refused_total");
     return refused >= 1 && refused == before;  // counted, and no longer changing
   }, 5s, 100ms));
   std::printf("[ metric ] 50 abandoned hellos sent in %.2f s of a 3 s wedge; refusals counted: %.0f\n", sent_s, refused);

@@ -174,6 +174,35 @@ TEST_F(CoreTest, StartsInFaultAndHellosAreChecked) {
   (void)first;
 }
 
+// A hello naming a patch the scene does not have is refused and counted, and changes nothing: not the safety
+// state, not its epoch, not any patch's link (the second adversarial review's F5: it used to FAULT the robot
+// with KIND_INTERNAL, so any caller could stop the cell by naming a patch that does not exist).
+TEST_F(CoreTest, AHelloForAPatchTheSceneDoesNotHaveIsRefusedAndChangesNothing) {
+  const std::vector<int> streams = ClearAll();
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  const v1::SafetyState before = core.SafetyState();
+  const auto status_before = core.Status(tc);
+  for (int k = 0; k < 3; ++k) {
+    v1::PatchMessage m = Hello(setup, 0);
+    m.set_patch_id("elbow");
+    const int s = core.OpenStream(tc);
+    const auto r = ruffini::testing::Deliver(core, s, m, tc);
+    ASSERT_TRUE(r.command && r.command->has_hello_refused());
+    EXPECT_EQ(r.command->hello_refused().reason(), v1::HELLO_REFUSAL_UNKNOWN_PATCH);
+    EXPECT_NE(r.command->hello_refused().message().find("elbow"), std::string::npos);
+    EXPECT_TRUE(r.close);
+    core.CloseStream(s, tc);
+    Beat(streams, 20);  // the scene's own patches keep beating: the refusals are all that happens
+  }
+  EXPECT_EQ(core.counters().hellos_refused[v1::HELLO_REFUSAL_UNKNOWN_PATCH], 3u);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  EXPECT_EQ(core.SafetyState().stop_epoch(), before.stop_epoch());
+  const auto status_after = core.Status(tc);
+  for (int i = 0; i < status_after.patches_size(); ++i) {
+    EXPECT_EQ(status_after.patches(i).link_state(), status_before.patches(i).link_state()) << i;
+  }
+}
+
 // A stream opened for a caller whose certificate names forearm_a (docs/security.md): a hello for forearm_b is
 // refused UNAUTHORIZED, counted, and changes nothing: not forearm_b's live link, not the safety state.
 TEST_F(CoreTest, AHelloForAnotherPatchThanTheCallersIsUnauthorizedAndChangesNothing) {

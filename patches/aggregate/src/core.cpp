@@ -302,7 +302,9 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
     }
     const std::int32_t patch = policy_.FindPatch(m.patch_id());
     if (patch == safety::kNoPatch) {
-      Note(policy_.OnHelloRefused(data_, m.patch_id(), now_ns));
+      // Refused and counted, nothing more: the scene's own patches are judged by their own streams (one that
+      // never connects is already missing), so a hello naming a patch the scene does not have -- a decoder
+      // configured for another robot, or any caller in --insecure mode -- must not FAULT the robot.
       return Refuse(s, v1::HELLO_REFUSAL_UNKNOWN_PATCH, "the scene names no patch '" + m.patch_id() + "'", now_ns);
     }
     const std::size_t pi = static_cast<std::size_t>(patch);

@@ -109,7 +109,7 @@ struct Event {
 struct Counters {
   std::uint64_t messages = 0;
   std::uint64_t hellos_accepted = 0;
-  std::array<std::uint64_t, 9> hellos_refused{};  // by v1::HelloRefusal
+  std::array<std::uint64_t, v1::HelloRefusal_ARRAYSIZE> hellos_refused{};  // by v1::HelloRefusal
   std::uint64_t protocol_errors = 0;
   std::uint64_t contacts = 0;                     // contact messages
   std::uint64_t contacts_placed = 0;              // placed in the base frame
