@@ -19,6 +19,9 @@ void RegisterSoakCommand(CLI::App& app) {
       "that no stop is lost or wrongly cleared and every fault is explained -> OUT/report.md (exit 3 when not)");
   cmd->add_option("--scene", o->scene_path, "Scene with a robot, a safety section and up to 16 patches")
       ->check(CLI::ExistingFile)->capture_default_str();
+  cmd->add_option("--patches", o->patches, "Only the scene's first N patches (a derived scene in OUT/scene.yaml); 0: all")
+      ->check(CLI::Range(0, 16))
+      ->default_val(0);
   cmd->add_option("--duration-s", o->duration_s, "How long the presses and faults go on, s (after a 10 s start-up)")
       ->check(CLI::Range(10.0, 86400.0))->capture_default_str();
   cmd->add_option("--rate-hz", o->rate_hz, "Interrogator rate")->check(CLI::Range(100.0, 5000.0))->capture_default_str();

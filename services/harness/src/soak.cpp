@@ -3,6 +3,7 @@
 #include <dirent.h>
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <atomic>
@@ -353,10 +354,48 @@ double Quantile(std::vector<double> v, double q) {
 
 }  // namespace
 
+// The scene at `path` with only its first `n` patches, written to `to` (relative paths made absolute, so the
+// copy reads the same robot, specs and models); returns `to`. A soak at 8 patches then needs no second scene.
+std::string ScenePrefix(const std::string& path, int n, const std::string& to) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    throw InputError(path + ": " + e.what());
+  }
+  const YAML::Node patches = root["patches"];
+  if (!patches || !patches.IsSequence() || n < 1 || static_cast<std::size_t>(n) > patches.size()) {
+    throw InputError("--patches " + std::to_string(n) + ": " + path + " has " +
+                     std::to_string(patches && patches.IsSequence() ? patches.size() : 0) + " patches");
+  }
+  const fs::path dir = fs::absolute(path).parent_path();
+  auto absolute = [&](YAML::Node node, const char* key) {
+    if (node[key] && node[key].IsScalar()) node[key] = (dir / node[key].as<std::string>()).lexically_normal().string();
+  };
+  YAML::Node kept(YAML::NodeType::Sequence);
+  for (int i = 0; i < n; ++i) {
+    YAML::Node p = YAML::Clone(patches[static_cast<std::size_t>(i)]);
+    absolute(p, "spec");
+    absolute(p, "model");
+    kept.push_back(p);
+  }
+  root["patches"] = kept;
+  if (root["robot"]) absolute(root["robot"], "urdf");
+  std::ofstream f(to);
+  f << "# " << path << " with its first " << n << " patches (ruffini soak --patches " << n << ")\n" << root << "\n";
+  if (!f) throw InputError("cannot write " + to);
+  return to;
+}
+
 SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::string&)>& log) {
   RequireServiceExecutables(o.bin_dir);
   if (!(o.duration_s > 0)) throw InputError("--duration-s must be above 0");
-  const SceneFile scene = LoadSceneFile(o.scene_path);
+  const fs::path out = o.out_dir;
+  fs::create_directories(out);
+  // --patches N: the scene's first N patches, written as OUT/scene.yaml (what every service is given).
+  const std::string scene_path = o.patches > 0 ? ScenePrefix(o.scene_path, o.patches, (out / "scene.yaml").string())
+                                               : o.scene_path;
+  const SceneFile scene = LoadSceneFile(scene_path);
   if (!scene.robot || !scene.safety) {
     throw InputError(o.scene_path + ": the soak needs a scene with a robot and a safety section (e.g. "
                      "config/scenes/soak-16.yaml)");
@@ -375,7 +414,6 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   }
   const int proxied = std::clamp(o.proxied_decoders, 0, static_cast<int>(patches.size()));
 
-  const fs::path out = o.out_dir;
   const fs::path run = out / "logs";
   fs::remove_all(run);
   fs::create_directories(run);
@@ -393,7 +431,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   // --- Start-up -----------------------------------------------------------------------------------------
   auto start_aggregator = [&](const std::string& listen, int generation) {
     const fs::path dir = run / ("aggregator-" + std::to_string(generation));
-    std::vector<std::string> args{exe("ruffini-aggregator"), "--insecure", "--scene", o.scene_path, "--listen", listen,
+    std::vector<std::string> args{exe("ruffini-aggregator"), "--insecure", "--scene", scene_path, "--listen", listen,
                                   "--metrics", "127.0.0.1:0", "--ports-file", (dir / "ports").string()};
     if (o.freshness_budget_ms > 0) {
       args.insert(args.end(), {"--patch-freshness-ms", std::to_string(o.freshness_budget_ms)});
@@ -403,7 +441,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
     if (port == 0) throw InputError("ruffini-aggregator did not start: " + child->stderr_text());
     return std::make_pair(std::move(child), port);
   };
-  log("starting ruffini-aggregator (" + o.scene_path + ", " + std::to_string(patches.size()) + " patches)");
+  log("starting ruffini-aggregator (" + scene_path + ", " + std::to_string(patches.size()) + " patches)");
   auto [aggregator, grpc_port] = start_aggregator("127.0.0.1:0", 1);
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
   SafetyWatch watch(address);
@@ -425,7 +463,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   auto controller_b = start_controller("controller_b", controller_b_proxy.address(), true);
 
   log("starting ruffini-sim (" + rate + " Hz, " + std::to_string(presses.size()) + " scripted presses)");
-  Child sim({exe("ruffini-sim"), "--scene", o.scene_path, "--scenario", scenario, "--rate-hz", rate, "--command-port",
+  Child sim({exe("ruffini-sim"), "--scene", scene_path, "--scenario", scenario, "--rate-hz", rate, "--command-port",
              "0", "--stream-port", "0", "--ports-file", (run / "sim" / "ports").string()},
             (run / "sim").string());
   const int stream_port = sim.WaitPort((run / "sim" / "ports").string(), "stream", 30s);
@@ -450,7 +488,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   int decoder_generation = 0;
   auto start_decoder = [&](std::size_t i) {
     const std::string agg = static_cast<int>(i) < proxied ? decoder_proxies[i]->address() : address;
-    std::vector<std::string> args{exe("ruffini-decoder"), "--insecure", "--scene", o.scene_path, "--patch", patches[i],
+    std::vector<std::string> args{exe("ruffini-decoder"), "--insecure", "--scene", scene_path, "--patch", patches[i],
                                   "--interrogator", "127.0.0.1:" + std::to_string(stream_port), "--aggregator", agg,
                                   "--metrics", "127.0.0.1:0", "--rate-hz", rate};
     if (o.freshness_budget_ms > 0) {
@@ -896,7 +934,9 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   for (const auto& inj : injections) ++injected[inj.what];
   std::ostringstream md;
   md << "# `ruffini soak`\n\n"
-     << "Written by `ruffini soak --scene " << o.scene_path << " --duration-s " << o.duration_s << " --rate-hz "
+     << "Written by `ruffini soak --scene " << o.scene_path
+     << (o.patches > 0 ? " --patches " + std::to_string(o.patches) : std::string()) << " --duration-s " << o.duration_s
+     << " --rate-hz "
      << o.rate_hz << " --seed " << o.seed << "` (docs/soak.md). " << patches.size() << " decoders at " << rate
      << " Hz into one aggregator, two controllers (controller_a publishes joint states at "
      << Fmt("%.0f", o.joint_rate_hz) << " Hz; controller_b only obeys, behind a TCP proxy), " << proxied

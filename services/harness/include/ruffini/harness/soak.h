@@ -18,6 +18,7 @@ namespace ruffini::harness {
 
 struct SoakOptions {
   std::string scene_path;           // a scene with a robot, a safety section and 1..16 patches
+  int patches = 0;                  // 1..16: only the scene's first N patches (a derived scene in OUT); 0: all
   std::string out_dir = "soak-report";
   std::string bin_dir;              // where ruffini-sim, -decoder, -aggregator, -controller are
   double duration_s = 60.0;         // the soak proper (presses and faults), after start-up
