@@ -5,6 +5,7 @@
 #   ... --report FILE   also writes a campaign report to FILE (date, machine, commit, command, executions, wall
 #                       time, crashes, final corpus, libFuzzer's cov/ft; the format of docs/fuzzing.md)
 #   ... --keep-corpus DIR  copies the final corpus to DIR (to resume a campaign with RUFFINI_FUZZ_CORPUS=DIR)
+#   ... --max-len N     libFuzzer's -max_len (default per target, below; the Core's short-program campaign: 96)
 # A campaign (docs/fuzzing.md): nice -n 15 tests/fuzz/run.sh --target core --runs 10000000 --report core.txt
 # --target picks the binary (build/release/bin/<target>_fuzz, or $RUFFINI_FUZZ_BIN) and its seed corpus
 # (tests/fuzz/corpus for hyperion, tests/fuzz/core_corpus for core, tests/fuzz/corpus_safety_client for
@@ -21,7 +22,7 @@ here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
 base=${RUFFINI_FUZZ_WORK:-$root/build/release/tests/fuzz/work}
 
-seconds=60 runs="" seed="" target=hyperion report="" keep=""
+seconds=60 runs="" seed="" target=hyperion report="" keep="" max_len_arg=""
 while (($#)); do
   case "$1" in
     --target) target=$2; shift 2 ;;
@@ -29,8 +30,9 @@ while (($#)); do
     --seed) seed=$2; shift 2 ;;
     --report) report=$2; shift 2 ;;
     --keep-corpus) keep=$2; shift 2 ;;
+    --max-len) max_len_arg=$2; shift 2 ;;
     [0-9]*) seconds=$1; shift ;;
-    *) echo "usage: $0 [--target hyperion|core|safety_client] [seconds] | --runs N [--seed S] [--report FILE] [--keep-corpus DIR]" >&2; exit 2 ;;
+    *) echo "usage: $0 [--target hyperion|core|safety_client] [seconds] | --runs N [--seed S] [--report FILE] [--keep-corpus DIR] [--max-len N]" >&2; exit 2 ;;
   esac
 done
 case "$target" in
@@ -40,7 +42,7 @@ case "$target" in
   *) echo "unknown target '$target' (hyperion, core or safety_client)" >&2; exit 2 ;;
 esac
 corpus=${RUFFINI_FUZZ_CORPUS:-$corpus}
-max_len=${RUFFINI_FUZZ_MAX_LEN:-$max_len}
+max_len=${max_len_arg:-${RUFFINI_FUZZ_MAX_LEN:-$max_len}}
 bin=${RUFFINI_FUZZ_BIN:-$root/build/release/bin/${target}_fuzz}
 
 if [[ ! -x "$bin" ]]; then
