@@ -22,6 +22,11 @@ void RegisterSoakCommand(CLI::App& app) {
   cmd->add_option("--patches", o->patches, "Only the scene's first N patches (a derived scene in OUT/scene.yaml); 0: all")
       ->check(CLI::Range(0, 16))
       ->default_val(0);
+  cmd->add_option("--realtime-priority", o->realtime_priority,
+                  "SCHED_FIFO priority for the decoders, aggregator and controllers (the sim and the proxies 10 above), "
+                  "as a robot cell runs its safety chain; needs CAP_SYS_NICE (0: normal priority)")
+      ->check(CLI::Range(0, 89))
+      ->default_val(0);
   cmd->add_option("--duration-s", o->duration_s, "How long the presses and faults go on, s (after a 10 s start-up)")
       ->check(CLI::Range(10.0, 86400.0))->capture_default_str();
   cmd->add_option("--rate-hz", o->rate_hz, "Interrogator rate")->check(CLI::Range(100.0, 5000.0))->capture_default_str();

@@ -429,6 +429,16 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   WriteScenario(scenario, presses, patches, kStartS + o.duration_s + 60.0, o.seed);
 
   // --- Start-up -----------------------------------------------------------------------------------------
+  // --realtime-priority: each service started under chrt (same pid after its exec, so signals, RSS and fds
+  // still reach the service).
+  if (o.realtime_priority < 0 || o.realtime_priority > 89) throw InputError("--realtime-priority: expected 0..89");
+  const std::string chrt = "/usr/bin/chrt";
+  if (o.realtime_priority > 0 && !fs::exists(chrt)) throw InputError("--realtime-priority needs " + chrt + " (util-linux)");
+  auto realtime = [&](std::vector<std::string> args, int above) {
+    if (o.realtime_priority == 0) return args;
+    args.insert(args.begin(), {chrt, "--fifo", std::to_string(o.realtime_priority + above)});
+    return args;
+  };
   auto start_aggregator = [&](const std::string& listen, int generation) {
     const fs::path dir = run / ("aggregator-" + std::to_string(generation));
     std::vector<std::string> args{exe("ruffini-aggregator"), "--insecure", "--scene", scene_path, "--listen", listen,
@@ -436,7 +446,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
     if (o.freshness_budget_ms > 0) {
       args.insert(args.end(), {"--patch-freshness-ms", std::to_string(o.freshness_budget_ms)});
     }
-    auto child = std::make_unique<Child>(args, dir.string());
+    auto child = std::make_unique<Child>(realtime(args, 0), dir.string());
     const int port = child->WaitPort((dir / "ports").string(), "grpc", 20s);
     if (port == 0) throw InputError("ruffini-aggregator did not start: " + child->stderr_text());
     return std::make_pair(std::move(child), port);
@@ -449,6 +459,11 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   service::TcpProxy controller_b_proxy(grpc_port);
   std::vector<std::unique_ptr<service::TcpProxy>> decoder_proxies;
   for (int i = 0; i < proxied; ++i) decoder_proxies.push_back(std::make_unique<service::TcpProxy>(grpc_port));
+  if (o.realtime_priority > 0) {
+    bool ok = controller_b_proxy.SetRealtimePriority(o.realtime_priority + 10);
+    for (auto& p : decoder_proxies) ok = p->SetRealtimePriority(o.realtime_priority + 10) && ok;
+    if (!ok) throw InputError("--realtime-priority: SCHED_FIFO refused for the proxies' threads (needs CAP_SYS_NICE)");
+  }
 
   auto start_controller = [&](const std::string& name, const std::string& addr, bool watch_only) {
     std::vector<std::string> args{exe("ruffini-controller"), "--insecure", "--robot", scene.name, "--aggregator", addr,
@@ -456,15 +471,16 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
                                   "--subscriber", name, "--connect-timeout-s", "20"};
     if (watch_only) args.push_back("--watch-only");
     if (o.freshness_budget_ms > 0) args.insert(args.end(), {"--freshness-budget-ms", std::to_string(o.freshness_budget_ms)});
-    return std::make_unique<Child>(args, (run / name).string());
+    return std::make_unique<Child>(realtime(args, 0), (run / name).string());
   };
   const std::int64_t controllers_started_ns = service::UnixNowNs();
   auto controller_a = start_controller("controller_a", address, false);
   auto controller_b = start_controller("controller_b", controller_b_proxy.address(), true);
 
   log("starting ruffini-sim (" + rate + " Hz, " + std::to_string(presses.size()) + " scripted presses)");
-  Child sim({exe("ruffini-sim"), "--scene", scene_path, "--scenario", scenario, "--rate-hz", rate, "--command-port",
-             "0", "--stream-port", "0", "--ports-file", (run / "sim" / "ports").string()},
+  Child sim(realtime({exe("ruffini-sim"), "--scene", scene_path, "--scenario", scenario, "--rate-hz", rate,
+                      "--command-port", "0", "--stream-port", "0", "--ports-file", (run / "sim" / "ports").string()},
+                     10),
             (run / "sim").string());
   const int stream_port = sim.WaitPort((run / "sim" / "ports").string(), "stream", 30s);
   if (stream_port == 0) throw InputError("ruffini-sim did not start: " + sim.stderr_text());
@@ -495,7 +511,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
       args.insert(args.end(), {"--freshness-budget-ms", std::to_string(o.freshness_budget_ms)});
     }
     decoders[i] = std::make_unique<Child>(
-        args, (run / ("decoder-" + patches[i] + "-" + std::to_string(++decoder_generation))).string());
+        realtime(args, 0), (run / ("decoder-" + patches[i] + "-" + std::to_string(++decoder_generation))).string());
     decoder_started_ns[i] = service::UnixNowNs();
   };
   for (std::size_t i = 0; i < patches.size(); ++i) start_decoder(i);
@@ -935,13 +951,20 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   std::ostringstream md;
   md << "# `ruffini soak`\n\n"
      << "Written by `ruffini soak --scene " << o.scene_path
-     << (o.patches > 0 ? " --patches " + std::to_string(o.patches) : std::string()) << " --duration-s " << o.duration_s
+     << (o.patches > 0 ? " --patches " + std::to_string(o.patches) : std::string())
+     << (o.realtime_priority > 0 ? " --realtime-priority " + std::to_string(o.realtime_priority) : std::string())
+     << " --duration-s " << o.duration_s
      << " --rate-hz "
      << o.rate_hz << " --seed " << o.seed << "` (docs/soak.md). " << patches.size() << " decoders at " << rate
      << " Hz into one aggregator, two controllers (controller_a publishes joint states at "
      << Fmt("%.0f", o.joint_rate_hz) << " Hz; controller_b only obeys, behind a TCP proxy), " << proxied
      << " decoder links behind TCP proxies, " << o.churn_threads << " threads churning watch streams, all on "
-     << "127.0.0.1. Machine: " << std::thread::hardware_concurrency() << " hardware threads.\n\n"
+     << "127.0.0.1. Machine: " << std::thread::hardware_concurrency() << " hardware threads. Scheduling: "
+     << (o.realtime_priority > 0
+             ? "SCHED_FIFO " + std::to_string(o.realtime_priority) + " for the decoders, the aggregator and the "
+               "controllers, " + std::to_string(o.realtime_priority + 10) + " for the sim and the proxies; the soak's "
+               "judge and watch churn at normal priority.\n\n"
+             : std::string("every process at normal priority (SCHED_OTHER).\n\n"))
      << "**" << (result.pass ? "PASS" : "FAIL") << "**: lost stops " << result.lost_stops << ", false clears "
      << result.false_clears << ", unexplained faults " << result.unexplained_faults << ", crashes " << crashes
      << ".\n\n"

@@ -29,6 +29,9 @@
 #include <thread>
 #include <vector>
 
+#include <pthread.h>
+#include <sched.h>
+
 namespace ruffini::service {
 
 class TcpProxy {
@@ -54,6 +57,13 @@ class TcpProxy {
   TcpProxy(const TcpProxy&) = delete;
   TcpProxy& operator=(const TcpProxy&) = delete;
 
+  // Runs the proxy's thread under SCHED_FIFO at `priority` (1..99; needs CAP_SYS_NICE): a test's stand-in for
+  // the network, which must not wait for a core behind the processes under test. False when refused.
+  bool SetRealtimePriority(int priority) {
+    sched_param p{};
+    p.sched_priority = priority;
+    return thread_.joinable() && pthread_setschedparam(thread_.native_handle(), SCHED_FIFO, &p) == 0;
+  }
   [[nodiscard]] int port() const noexcept { return port_; }  // 0: could not listen
   [[nodiscard]] std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
   // Connections accepted so far (a client's reconnects show here).

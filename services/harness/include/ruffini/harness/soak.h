@@ -40,6 +40,11 @@ struct SoakOptions {
   // channel; lost stops, false clears and crashes always fail.
   bool unexplained_faults_fail = true;
   int freshness_budget_ms = 0;  // also the controllers' (ruffini-controller --freshness-budget-ms)
+  // > 0: real-time scheduling (SCHED_FIFO, through chrt; needs CAP_SYS_NICE), as a robot cell runs its safety
+  // chain: the decoders, the aggregator and the controllers at this priority; the sim (the interrogator's
+  // stand-in, hardware that never waits for a core) and the TCP proxies (the network's) 10 above. The soak's
+  // own judge, operator and watch churn stay at normal priority. 0: everything at normal priority.
+  int realtime_priority = 0;
 };
 
 struct SoakResult {
