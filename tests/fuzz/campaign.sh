@@ -3,7 +3,7 @@
 # keeps its CPU):
 #   tests/fuzz/campaign.sh OUT_DIR [RUNS [CORE_LONG_SECONDS]]
 # runs hyperion, safety_client and core for RUNS executions each (default 10000000) with run.sh. The Core's
-# RUNS are short programs (--max-len 96: about a dozen steps, some 2 000 a second; a program of hundreds of
+# RUNS are short programs (--max-len 96: some 10 to 25 steps, about 2 000 a second; a program of hundreds of
 # steps costs milliseconds, docs/fuzzing.md); with CORE_LONG_SECONDS, a run of long programs (max_len 2048)
 # follows for that long. Writes OUT_DIR/<target>.txt (run.sh --report; core-long.txt), keeps
 # OUT_DIR/corpus_<target>, and prints the reports. Exits 1 when any target crashed.
