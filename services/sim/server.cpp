@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 #include <deque>
 #include <iterator>
 #include <limits>
@@ -160,6 +161,7 @@ struct SimServer::Impl {
 
   void Tick() {
     const auto now = std::chrono::steady_clock::now();
+    NoteLateWakeUp(now);
     // Catch up on missed deadlines, a bounded number per wake-up so the command port stays served.
     for (int i = 0; i < 64 && Deadline(next_sample) <= now; ++i) Emit(next_sample++);
     if (next_sample >= next_summary) {  // at most one fault summary a second of samples, and only on news
@@ -170,6 +172,31 @@ struct SimServer::Impl {
     timer.async_wait([this](const boost::system::error_code& ec) {
       if (!ec && !stopped) Tick();
     });
+  }
+
+  // A wake-up more than kLateWakeUp after the deadline it was set for is logged with what the thread did
+  // meanwhile: its CPU time since the previous wake-up against the wall time. Little CPU over a long gap: the
+  // thread was not running (a core was not given to it); CPU time close to the gap: the work itself took it.
+  // A soak's silences can then be traced to the sim or ruled out (docs/soak.md).
+  static constexpr std::chrono::milliseconds kLateWakeUp{10};
+  static std::int64_t ThreadCpuNs() noexcept {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+  }
+  void NoteLateWakeUp(std::chrono::steady_clock::time_point now) {
+    const std::int64_t cpu = ThreadCpuNs();
+    const auto late = now - Deadline(next_sample);
+    if (last_tick.time_since_epoch().count() != 0 && late > kLateWakeUp) {
+      ++late_wake_ups;
+      const double gap_ms = std::chrono::duration<double, std::milli>(now - last_tick).count();
+      spdlog::warn("late wake-up: sample {} {:.1f} ms after its deadline; since the previous wake-up {:.1f} ms of "
+                   "wall time, {:.1f} ms of this thread's CPU time",
+                   next_sample, std::chrono::duration<double, std::milli>(late).count(), gap_ms,
+                   static_cast<double>(cpu - last_tick_cpu_ns) / 1e6);
+    }
+    last_tick = now;
+    last_tick_cpu_ns = cpu;
   }
 
   // The first fault of a kind is logged at once; the rest are counted (and summarised once a second).
@@ -429,6 +456,7 @@ struct SimServer::Impl {
       LogFaults("fault totals");
     }
     write_lag.Log();
+    spdlog::info("late wake-ups (more than {} ms after the deadline): {}", kLateWakeUp.count(), late_wake_ups);
   }
 
   void Run() {
@@ -469,6 +497,9 @@ struct SimServer::Impl {
   std::chrono::steady_clock::time_point start;
   std::int64_t unix_start_ns = 0;  // Unix time at `start`
   std::uint64_t next_sample = 0;
+  std::chrono::steady_clock::time_point last_tick{};
+  std::int64_t last_tick_cpu_ns = 0;
+  std::uint64_t late_wake_ups = 0;  // more than kLateWakeUp after their deadline
   std::uint64_t next_summary = 0;
   std::size_t max_queue = 0;           // writes queued to one stream client before it counts as too slow
   FaultCounts counts, logged_counts;

@@ -839,6 +839,27 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   for (const auto& r : resets) {
     if (!in_service_ns.count(r.run)) in_service_ns[r.run] = r.requested_ns;
   }
+  // The sim's late wake-ups (ruffini-sim logs each one more than 10 ms after its deadline, with its thread's
+  // CPU time over the gap): an unexplained silence that follows one started at the interrogator's stand-in.
+  struct SimLate {
+    std::int64_t unix_ns = 0;  // the deadline it missed, on the Unix clock
+    double late_ms = 0, gap_ms = 0, cpu_ms = 0;
+  };
+  std::vector<SimLate> sim_late;
+  {
+    const std::string err = sim.stderr_text();
+    const std::string key = "late wake-up: sample ";
+    for (std::size_t at = err.find(key); at != std::string::npos; at = err.find(key, at + key.size())) {
+      unsigned long long k = 0;
+      SimLate l;
+      if (std::sscanf(err.c_str() + at + key.size(),
+                      "%llu %lf ms after its deadline; since the previous wake-up %lf ms of wall time, %lf ms", &k,
+                      &l.late_ms, &l.gap_ms, &l.cpu_ms) == 4) {
+        l.unix_ns = sim_t0 + static_cast<std::int64_t>(static_cast<double>(k) * 1e9 / o.rate_hz);
+        sim_late.push_back(l);
+      }
+    }
+  }
   std::map<std::string, int> fault_kinds;
   {
     std::set<std::tuple<std::uint64_t, std::uint64_t, int, std::string>> seen;
@@ -869,8 +890,14 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
                  << s.patch << " (" << s.message << ")"
                  << (stall_ms > 0 ? "; the host stalled then (the soak's own 10 ms sleep woke " + Fmt("%.0f", stall_ms) +
                                         " ms late within 0.2 s)"
-                                  : std::string())
-                 << "\n";
+                                  : std::string());
+        for (const auto& l : sim_late) {
+          if (l.unix_ns < s.arrival_ns - 200'000'000 || l.unix_ns > s.arrival_ns) continue;
+          findings << "; the sim woke " << Fmt("%.1f", l.late_ms) << " ms late "
+                   << Fmt("%.0f", static_cast<double>(s.arrival_ns - l.unix_ns) / 1e6) << " ms before ("
+                   << Fmt("%.1f", l.cpu_ms) << " ms of CPU in a " << Fmt("%.1f", l.gap_ms) << " ms gap)";
+        }
+        findings << "\n";
       }
     }
   }
@@ -992,7 +1019,18 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   for (const auto& [what, n] : injected) md << "- " << what << ": " << n << "\n";
   md << "- watch streams opened and abandoned: " << churn.calls() << "\n- operator resets accepted: " << resets.size()
      << "\n- controller link-error latches acknowledged (SIGUSR1): " << acknowledgements
-     << "\n\nHost stalls (the soak's own 10 ms sleep woke more than 20 ms late): " << stalls.size();
+     << "\n\nSim late wake-ups (more than 10 ms after a sample's deadline): " << sim_late.size();
+  if (!sim_late.empty()) {
+    int idle = 0;
+    double worst = 0;
+    for (const auto& l : sim_late) {
+      idle += l.cpu_ms < 0.5 * l.gap_ms;
+      worst = std::max(worst, l.late_ms);
+    }
+    md << ", the worst " << Fmt("%.1f", worst) << " ms late; in " << idle
+       << " of them the sim's thread had less than half the gap on a CPU (it was not running, not busy)";
+  }
+  md << "\n\nHost stalls (the soak's own 10 ms sleep woke more than 20 ms late): " << stalls.size();
   if (!stalls.empty()) {
     double worst = 0;
     for (const auto& st : stalls) worst = std::max(worst, st.second);
