@@ -27,6 +27,11 @@ void RegisterSoakCommand(CLI::App& app) {
                   "as a robot cell runs its safety chain; needs CAP_SYS_NICE (0: normal priority)")
       ->check(CLI::Range(0, 89))
       ->default_val(0);
+  cmd->add_option("--stand-in-priority", o->stand_in_priority,
+                  "SCHED_FIFO priority for the stand-ins only: the sim (the interrogator, hardware) and the proxies "
+                  "(the network) (0: --realtime-priority + 10 when that is set, else normal priority)")
+      ->check(CLI::Range(0, 99))
+      ->default_val(0);
   cmd->add_option("--duration-s", o->duration_s, "How long the presses and faults go on, s (after a 10 s start-up)")
       ->check(CLI::Range(10.0, 86400.0))->capture_default_str();
   cmd->add_option("--rate-hz", o->rate_hz, "Interrogator rate")->check(CLI::Range(100.0, 5000.0))->capture_default_str();

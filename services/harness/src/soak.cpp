@@ -434,10 +434,16 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   if (o.realtime_priority < 0 || o.realtime_priority > 89) throw InputError("--realtime-priority: expected 0..89");
   const std::string chrt = "/usr/bin/chrt";
   if (o.realtime_priority > 0 && !fs::exists(chrt)) throw InputError("--realtime-priority needs " + chrt + " (util-linux)");
-  auto realtime = [&](std::vector<std::string> args, int above) {
-    if (o.realtime_priority == 0) return args;
-    args.insert(args.begin(), {chrt, "--fifo", std::to_string(o.realtime_priority + above)});
+  if (o.stand_in_priority < 0 || o.stand_in_priority > 99) throw InputError("--stand-in-priority: expected 0..99");
+  if (o.stand_in_priority > 0 && !fs::exists(chrt)) throw InputError("--stand-in-priority needs " + chrt + " (util-linux)");
+  const int stand_in = o.stand_in_priority > 0 ? o.stand_in_priority
+                                               : (o.realtime_priority > 0 ? o.realtime_priority + 10 : 0);
+  auto fifo = [&](std::vector<std::string> args, int priority) {
+    if (priority > 0) args.insert(args.begin(), {chrt, "--fifo", std::to_string(priority)});
     return args;
+  };
+  auto realtime = [&](std::vector<std::string> args, int above) {
+    return fifo(std::move(args), above > 0 ? stand_in : o.realtime_priority);
   };
   auto start_aggregator = [&](const std::string& listen, int generation) {
     const fs::path dir = run / ("aggregator-" + std::to_string(generation));
@@ -459,9 +465,9 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   service::TcpProxy controller_b_proxy(grpc_port);
   std::vector<std::unique_ptr<service::TcpProxy>> decoder_proxies;
   for (int i = 0; i < proxied; ++i) decoder_proxies.push_back(std::make_unique<service::TcpProxy>(grpc_port));
-  if (o.realtime_priority > 0) {
-    bool ok = controller_b_proxy.SetRealtimePriority(o.realtime_priority + 10);
-    for (auto& p : decoder_proxies) ok = p->SetRealtimePriority(o.realtime_priority + 10) && ok;
+  if (stand_in > 0) {
+    bool ok = controller_b_proxy.SetRealtimePriority(stand_in);
+    for (auto& p : decoder_proxies) ok = p->SetRealtimePriority(stand_in) && ok;
     if (!ok) throw InputError("--realtime-priority: SCHED_FIFO refused for the proxies' threads (needs CAP_SYS_NICE)");
   }
 
@@ -980,6 +986,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
      << "Written by `ruffini soak --scene " << o.scene_path
      << (o.patches > 0 ? " --patches " + std::to_string(o.patches) : std::string())
      << (o.realtime_priority > 0 ? " --realtime-priority " + std::to_string(o.realtime_priority) : std::string())
+     << (o.stand_in_priority > 0 ? " --stand-in-priority " + std::to_string(o.stand_in_priority) : std::string())
      << " --duration-s " << o.duration_s
      << " --rate-hz "
      << o.rate_hz << " --seed " << o.seed << "` (docs/soak.md). " << patches.size() << " decoders at " << rate
@@ -987,11 +994,12 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
      << Fmt("%.0f", o.joint_rate_hz) << " Hz; controller_b only obeys, behind a TCP proxy), " << proxied
      << " decoder links behind TCP proxies, " << o.churn_threads << " threads churning watch streams, all on "
      << "127.0.0.1. Machine: " << std::thread::hardware_concurrency() << " hardware threads. Scheduling: "
-     << (o.realtime_priority > 0
-             ? "SCHED_FIFO " + std::to_string(o.realtime_priority) + " for the decoders, the aggregator and the "
-               "controllers, " + std::to_string(o.realtime_priority + 10) + " for the sim and the proxies; the soak's "
-               "judge and watch churn at normal priority.\n\n"
-             : std::string("every process at normal priority (SCHED_OTHER).\n\n"))
+     << (o.realtime_priority > 0 ? "SCHED_FIFO " + std::to_string(o.realtime_priority) +
+                                       " for the decoders, the aggregator and the controllers; "
+                                 : std::string("the decoders, the aggregator and the controllers at normal priority; "))
+     << (stand_in > 0 ? "SCHED_FIFO " + std::to_string(stand_in) + " for the sim and the proxies (the stand-ins)"
+                      : std::string("the sim and the proxies at normal priority"))
+     << "; the soak's judge and watch churn at normal priority.\n\n"
      << "**" << (result.pass ? "PASS" : "FAIL") << "**: lost stops " << result.lost_stops << ", false clears "
      << result.false_clears << ", unexplained faults " << result.unexplained_faults << ", crashes " << crashes
      << ".\n\n"

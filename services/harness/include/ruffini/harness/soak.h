@@ -45,6 +45,9 @@ struct SoakOptions {
   // stand-in, hardware that never waits for a core) and the TCP proxies (the network's) 10 above. The soak's
   // own judge, operator and watch churn stay at normal priority. 0: everything at normal priority.
   int realtime_priority = 0;
+  // > 0: SCHED_FIFO at this priority for the stand-ins only (the sim, the interrogator's; the proxies, the
+  // network's), whatever realtime_priority says; 0: realtime_priority + 10 when that is set, else normal.
+  int stand_in_priority = 0;
 };
 
 struct SoakResult {
