@@ -85,6 +85,7 @@ if [[ -n "$report" ]]; then
     echo "date:        $(date -u -d "@$started" '+%Y-%m-%d %H:%M:%S UTC')"
     echo "machine:     $(uname -srm), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | sed 's/.*: //'), load average at the end $(cut -d' ' -f1-3 /proc/loadavg)"
     echo "commit:      $commit"
+    echo "scheduling:  $(chrt -p $$ 2>/dev/null | head -n 1 | sed 's/.*: //' || echo unknown), nice $(nice)"
     echo "command:     nice $(nice) $(rel "$bin") $(rel "${args[*]}") CORPUS (CORPUS: a copy of $(rel "$corpus"), $seeds inputs)"
     echo "executions:  ${execs:-unknown}"
     echo "wall time:   ${wall} s ($(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$work/log.txt" | grep -o '[0-9]*$' || echo '?') executions/s)"
