@@ -70,9 +70,13 @@ set -e
 wall=$(($(date -u +%s) - started))
 
 execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$work/log.txt" | tail -n 1 | grep -o '[0-9]*$' || true)
-crashes=$(find "$work/artifacts" -type f | wc -l)
+# libFuzzer's findings: crash-, leak-, timeout- and oom- files. A slow-unit- file is an input that once took more than
+# 10 s (on a starved machine, any input can): reported, replayed by whoever reads the report, not a finding.
+crashes=$(find "$work/artifacts" -type f ! -name 'slow-unit-*' | wc -l)
+slow=$(find "$work/artifacts" -type f -name 'slow-unit-*' | wc -l)
 echo "executions: ${execs:-unknown}"
 echo "crashes: $crashes"
+((slow == 0)) || echo "slow units (more than 10 s once; replay to see): $slow"
 echo "corpus: $(ls "$work/corpus" | wc -l) inputs"
 if [[ -n "$keep" ]]; then mkdir -p "$keep" && cp "$work/corpus"/* "$keep/"; fi
 if [[ -n "$report" ]]; then
@@ -89,13 +93,13 @@ if [[ -n "$report" ]]; then
     echo "command:     nice $(nice) $(rel "$bin") $(rel "${args[*]}") CORPUS (CORPUS: a copy of $(rel "$corpus"), $seeds inputs)"
     echo "executions:  ${execs:-unknown}"
     echo "wall time:   ${wall} s ($(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$work/log.txt" | grep -o '[0-9]*$' || echo '?') executions/s)"
-    echo "crashes:     $crashes (libFuzzer exit status $rc)"
+    echo "crashes:     $crashes (libFuzzer exit status $rc)$( ((slow == 0)) || echo "; slow units: $slow (an input that once took more than 10 s; the artifacts are kept)")"
     echo "corpus:      $(ls "$work/corpus" | wc -l) inputs at the end (from $seeds)"
     echo "coverage:    $(echo "$status" | grep -oE 'cov: [0-9]+ ft: [0-9]+' || echo unknown)"
     echo "last status: $status"
   } >"$report"
 fi
-if ((rc != 0 || crashes != 0)); then
+if ((rc != 0 || crashes != 0 || slow != 0)); then
   tail -n 40 "$work/log.txt"
   echo "kept: $work"
   exit 1
