@@ -201,6 +201,12 @@ std::string DescribeCoverage(const SceneCoverage& c, bool points) {
   for (std::size_t i = 0; i < c.regions.size(); ++i) {
     const v1::RegionCoverage& r = c.regions[i];
     const decode::RegionGuarantee& g = c.guarantees[i];
+    if (r.points() == 0 && g.unmapped.empty()) {
+      // Nothing to guarantee: a scene may name a region none of its patches is in (a soak's --patches subset).
+      out << "region " << r.region() << ": threshold " << Num(r.threshold_n()) << " N; no patch of the scene is in "
+          << "this region: nothing is covered, nothing to guarantee\n";
+      continue;
+    }
     out << "region " << r.region() << ": threshold " << Num(r.threshold_n()) << " N, press factor "
         << Num(r.press_factor()) << "; maps of level " << Num(r.map_level_n()) << " N; guaranteed threshold "
         << Num(r.guaranteed_threshold_n()) << " N (every press of " << Num(r.stop_force_n()) << " N or more is "
