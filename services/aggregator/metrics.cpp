@@ -1,7 +1,8 @@
 // The aggregator's Prometheus metrics: a collectable that reads Stats (atomics the loop updates) at scrape time.
 #include <prometheus/metric_family.h>
-#include <cctype>
 #include <prometheus/metric_type.h>
+
+#include <cctype>
 
 #include "server_impl.h"
 

@@ -83,7 +83,8 @@ if [[ -n "$report" ]]; then
   # libFuzzer's last status line (e.g. "#10000000 DONE cov: 812 ft: 3547 corp: 903/154Kb ...").
   status=$(grep -E '^#[0-9]+' "$work/log.txt" | tail -n 1 || true)
   # Paths in the report relative to the repository, so that a reader elsewhere can rerun the command.
-  rel() { echo "${1//$root\//}"; }
+  # The run's scratch directory (a mktemp name, gone after a clean run) is written WORK.
+  rel() { local t="${1//$work/WORK}"; echo "${t//$root\//}"; }
   {
     echo "target:      $target ($(rel "$bin"))"
     echo "date:        $(date -u -d "@$started" '+%Y-%m-%d %H:%M:%S UTC')"

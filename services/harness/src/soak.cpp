@@ -352,8 +352,6 @@ double Quantile(std::vector<double> v, double q) {
   return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))];
 }
 
-}  // namespace
-
 // The scene at `path` with only its first `n` patches, written to `to` (relative paths made absolute, so the
 // copy reads the same robot, specs and models); returns `to`. A soak at 8 patches then needs no second scene.
 std::string ScenePrefix(const std::string& path, int n, const std::string& to) {
@@ -386,6 +384,8 @@ std::string ScenePrefix(const std::string& path, int n, const std::string& to) {
   if (!f) throw InputError("cannot write " + to);
   return to;
 }
+
+}  // namespace
 
 SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::string&)>& log) {
   RequireServiceExecutables(o.bin_dir);
@@ -429,21 +429,20 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   WriteScenario(scenario, presses, patches, kStartS + o.duration_s + 60.0, o.seed);
 
   // --- Start-up -----------------------------------------------------------------------------------------
-  // --realtime-priority: each service started under chrt (same pid after its exec, so signals, RSS and fds
-  // still reach the service).
+  // --realtime-priority, --stand-in-priority: a process started under chrt (the same pid after its exec, so
+  // signals, RSS and fds still reach the service).
   if (o.realtime_priority < 0 || o.realtime_priority > 89) throw InputError("--realtime-priority: expected 0..89");
-  const std::string chrt = "/usr/bin/chrt";
-  if (o.realtime_priority > 0 && !fs::exists(chrt)) throw InputError("--realtime-priority needs " + chrt + " (util-linux)");
   if (o.stand_in_priority < 0 || o.stand_in_priority > 99) throw InputError("--stand-in-priority: expected 0..99");
-  if (o.stand_in_priority > 0 && !fs::exists(chrt)) throw InputError("--stand-in-priority needs " + chrt + " (util-linux)");
+  const int services_priority = o.realtime_priority;
   const int stand_in = o.stand_in_priority > 0 ? o.stand_in_priority
                                                : (o.realtime_priority > 0 ? o.realtime_priority + 10 : 0);
+  const std::string chrt = "/usr/bin/chrt";
+  if ((services_priority > 0 || stand_in > 0) && !fs::exists(chrt)) {
+    throw InputError("--realtime-priority and --stand-in-priority need " + chrt + " (util-linux)");
+  }
   auto fifo = [&](std::vector<std::string> args, int priority) {
     if (priority > 0) args.insert(args.begin(), {chrt, "--fifo", std::to_string(priority)});
     return args;
-  };
-  auto realtime = [&](std::vector<std::string> args, int above) {
-    return fifo(std::move(args), above > 0 ? stand_in : o.realtime_priority);
   };
   auto start_aggregator = [&](const std::string& listen, int generation) {
     const fs::path dir = run / ("aggregator-" + std::to_string(generation));
@@ -452,7 +451,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
     if (o.freshness_budget_ms > 0) {
       args.insert(args.end(), {"--patch-freshness-ms", std::to_string(o.freshness_budget_ms)});
     }
-    auto child = std::make_unique<Child>(realtime(args, 0), dir.string());
+    auto child = std::make_unique<Child>(fifo(args, services_priority), dir.string());
     const int port = child->WaitPort((dir / "ports").string(), "grpc", 20s);
     if (port == 0) throw InputError("ruffini-aggregator did not start: " + child->stderr_text());
     return std::make_pair(std::move(child), port);
@@ -468,7 +467,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   if (stand_in > 0) {
     bool ok = controller_b_proxy.SetRealtimePriority(stand_in);
     for (auto& p : decoder_proxies) ok = p->SetRealtimePriority(stand_in) && ok;
-    if (!ok) throw InputError("--realtime-priority: SCHED_FIFO refused for the proxies' threads (needs CAP_SYS_NICE)");
+    if (!ok) throw InputError("SCHED_FIFO " + std::to_string(stand_in) + " refused for the proxies' threads (needs CAP_SYS_NICE)");
   }
 
   auto start_controller = [&](const std::string& name, const std::string& addr, bool watch_only) {
@@ -477,16 +476,16 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
                                   "--subscriber", name, "--connect-timeout-s", "20"};
     if (watch_only) args.push_back("--watch-only");
     if (o.freshness_budget_ms > 0) args.insert(args.end(), {"--freshness-budget-ms", std::to_string(o.freshness_budget_ms)});
-    return std::make_unique<Child>(realtime(args, 0), (run / name).string());
+    return std::make_unique<Child>(fifo(args, services_priority), (run / name).string());
   };
   const std::int64_t controllers_started_ns = service::UnixNowNs();
   auto controller_a = start_controller("controller_a", address, false);
   auto controller_b = start_controller("controller_b", controller_b_proxy.address(), true);
 
   log("starting ruffini-sim (" + rate + " Hz, " + std::to_string(presses.size()) + " scripted presses)");
-  Child sim(realtime({exe("ruffini-sim"), "--scene", scene_path, "--scenario", scenario, "--rate-hz", rate,
-                      "--command-port", "0", "--stream-port", "0", "--ports-file", (run / "sim" / "ports").string()},
-                     10),
+  Child sim(fifo({exe("ruffini-sim"), "--scene", scene_path, "--scenario", scenario, "--rate-hz", rate,
+                  "--command-port", "0", "--stream-port", "0", "--ports-file", (run / "sim" / "ports").string()},
+                 stand_in),
             (run / "sim").string());
   const int stream_port = sim.WaitPort((run / "sim" / "ports").string(), "stream", 30s);
   if (stream_port == 0) throw InputError("ruffini-sim did not start: " + sim.stderr_text());
@@ -517,7 +516,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
       args.insert(args.end(), {"--freshness-budget-ms", std::to_string(o.freshness_budget_ms)});
     }
     decoders[i] = std::make_unique<Child>(
-        realtime(args, 0), (run / ("decoder-" + patches[i] + "-" + std::to_string(++decoder_generation))).string());
+        fifo(args, services_priority), (run / ("decoder-" + patches[i] + "-" + std::to_string(++decoder_generation))).string());
     decoder_started_ns[i] = service::UnixNowNs();
   };
   for (std::size_t i = 0; i < patches.size(); ++i) start_decoder(i);
