@@ -14,6 +14,7 @@
 #include "ruffini/decode/model_io.h"
 #include "ruffini/decode/pipeline.h"
 #include "ruffini/error.h"
+#include "ruffini/decode/touches.h"
 #include "ruffini/eval/calibrate.h"
 #include "ruffini/eval/evaluation.h"
 #include "ruffini/eval/stream.h"
@@ -390,7 +391,48 @@ void RegisterCalibrate(CLI::App& app) {
 
 }  // namespace
 
+void RegisterFitResponse(CLI::App& app) {
+  struct Args {
+    std::string model, data, out, area = "indented", patch_spec = RUFFINI_DEFAULT_PATCH;
+    int indentations = 0;
+    double multiple_misfit = 0.0;
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "fit-response",
+      "Learn one touch's response map from a recording's indentations and store it in a model file: the decoder then "
+      "flags frames no single touch explains (two touches) and fits two (docs/decoders.md, \"Two touches\"). Use "
+      "validation data, never test data");
+  cmd->add_option("--model", a->model, "Model file (.rmodel)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--data", a->data, "Recording (.h5) of the model's cast")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--out", a->out, "Model file to write (may be --model)")->required();
+  cmd->add_option("--indentations", a->indentations, "Use the recording's first N indentations (0 = all)")
+      ->check(CLI::Range(0, 1000000))->capture_default_str();
+  cmd->add_option("--area", a->area, "The map's grid: indented (the spec's indented area) | whole (the patch)")
+      ->check(CLI::IsMember({"indented", "whole"}))->capture_default_str();
+  cmd->add_option("--multiple-misfit", a->multiple_misfit,
+                  "Misfit above which a frame is not one touch (0..1; 0: the map is stored, nothing is flagged)")
+      ->check(CLI::Range(0.0, 1.0))->required();
+  cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
+  cmd->callback([a]() {
+    ModelAndData md = LoadModelAndData(a->model, a->data, a->patch_spec);
+    const dataset::Dataset cal = eval::FirstIndentations(md.data, a->indentations);
+    const eval::Prepared p = eval::PrepareFrames(cal, decode::BaselineFor(md.model, cal.info.sample_rate_hz));
+    const patch::Region whole = md.spec.Extent();
+    const decode::ResponseModel r = eval::FitResponse(p, md.spec, {}, a->area == "whole" ? &whole : nullptr);
+    v1::DecoderModel m = md.model;
+    const std::string source = "ruffini fit-response --data " + a->data + " --indentations " + std::to_string(a->indentations) +
+                               " --area " + a->area + " --multiple-misfit " + std::to_string(a->multiple_misfit);
+    *m.mutable_response() = decode::ToProto(r, a->multiple_misfit, source);
+    decode::ValidateModel(m, a->out);
+    decode::SaveModel(a->out, m);
+    std::printf("response map: %d x %d nodes (Y %.1f.., R %.1f..), stiffening %.3f; wrote %s\n", r.ny, r.nr, r.y0_mm, r.r0_deg,
+                r.stiffening, a->out.c_str());
+  });
+}
+
 void RegisterDecodeCommands(CLI::App& app) {
+  RegisterFitResponse(app);
   RegisterTrain(app);
   RegisterEvaluate(app);
   RegisterDecode(app);

@@ -30,6 +30,7 @@ struct PressOutcome {
   bool fault = false;       // a fault message during the press
   float max_force_n = 0.0f; // largest contact force reported
   [[nodiscard]] bool stops() const noexcept { return stop_force || over_range || fault; }
+  std::vector<link::Contact> hold;  // the contact messages of the hold (the force steady)
 };
 
 struct ProbeAt {
@@ -51,6 +52,8 @@ class HardPressRig {
   }
 
   [[nodiscard]] const twin::SkinTwin& twin() const noexcept { return twin_; }
+  // The decoder's pipeline settings (the service's defaults unless a test changes them).
+  decode::PipelineConfig& pipeline_config() noexcept { return pipeline_config_; }
 
   // Several probes pressed together (same ramp, hold and release).
   PressOutcome Press(std::span<const ProbeAt> probes, double threshold_n, std::uint64_t seed = 1) const {
@@ -124,6 +127,8 @@ class HardPressRig {
       const link::Message& m = sink.messages[i];
       if (m.kind == link::Message::Kind::kFault && m.fault.code != link::FaultCode::kNone) out.fault = true;
       if (m.kind == link::Message::Kind::kContact) {
+        const double t = static_cast<double>(m.t_ns - epoch_ns) * 1e-9 - t_press;
+        if (t >= ramp && t <= ramp + hold) out.hold.push_back(m.contact);
         out.max_force_n = std::max(out.max_force_n, m.contact.force_n);
         if (m.contact.force_n > threshold_n) out.stop_force = true;
 #ifdef RUFFINI_HAS_OVER_RANGE

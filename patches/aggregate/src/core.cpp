@@ -471,6 +471,7 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       body.set_t_ns(m.t_ns());
       body.set_force_n(std::isfinite(c.force_n()) ? c.force_n() : -1.0f);
       body.set_force_sd_n(std::isfinite(c.force_sd_n()) ? c.force_sd_n() : 0.0f);
+      body.set_multiple(c.located() && c.multiple());
       body.add_patch_ids(std::string(id));
       body.set_body_region(pc.region);
       const std::int32_t region = policy_.FindRegion(pc.region);
@@ -733,6 +734,7 @@ v1::ContactSet Core::Contacts(std::int64_t now_ns) {
       if (!f.HasPatch(i)) continue;
       b->add_patch_ids(setup_.patches[i].id);
       const v1::BodyContact& own = links_[i].contact;
+      if (own.multiple()) b->set_multiple(true);
       if (id == 0 || own.contact_id() < id) id = own.contact_id();
       if (onset == 0 || own.onset_t_ns() < onset) onset = own.onset_t_ns();
       t = std::max(t, own.t_ns());

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "ruffini/decode/sensitivity.h"
+#include "ruffini/decode/touches.h"
 #include "ruffini/error.h"
 
 namespace ruffini::decode {
@@ -193,6 +194,7 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
         throw InputError("sensitivity maps must be in ascending level_n, one per level");
       }
     }
+    if (m.has_response()) (void)TouchCheck(m.response());  // throws what is wrong with it
   } catch (const InputError& e) {
     throw InputError(where + ": " + e.what());
   }

@@ -77,6 +77,24 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
     position_floor_mm2_ = u.position_floor_mm2();
   }
   mm_per_deg_ = m.surface_radius_mm() * std::numbers::pi / 180.0;
+  if (!(config_.multi_rel > 0 && config_.multi_rel <= 1 && config_.multi_floor_pm >= 0 &&
+        config_.multi_link_mm >= 0 && config_.multi_margin_mm >= 0 && config_.multi_link_mm < 1e4 &&
+        config_.multi_margin_mm < 1e4)) {
+    throw InputError("pipeline: multi_rel must be in (0, 1], multi_floor_pm, multi_link_mm and multi_margin_mm >= 0");
+  }
+  if (m.has_response()) touches_.emplace(m.response());
+  half_y_mm_ = 0.5 * spec.extent_y_mm;
+  half_a_mm_ = 0.5 * spec.extent_r_deg * mm_per_deg_;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    grating_y_mm_[i] = spec.gratings[i].centre.y_mm;
+    grating_a_mm_[i] = spec.gratings[i].centre.r_deg * mm_per_deg_;
+  }
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    for (std::size_t j = 0; j < kGratings; ++j) {
+      const double d = std::hypot(grating_y_mm_[i] - grating_y_mm_[j], grating_a_mm_[i] - grating_a_mm_[j]);
+      if (d <= config_.multi_link_mm) linked_[i] = static_cast<std::uint16_t>(linked_[i] | (1u << j));
+    }
+  }
   if (!(config_.contact_confirm_s >= 0 && config_.contact_confirm_s <= 1.0)) {
     throw InputError("pipeline: contact_confirm_s must be 0..1 s");
   }
@@ -134,6 +152,103 @@ float Pipeline<Scalar>::Interp(const std::vector<float>& ys, float x) const noex
   const auto k = static_cast<std::size_t>(it - force_knots_.begin());
   const float t = (x - force_knots_[k - 1]) / (force_knots_[k] - force_knots_[k - 1]);
   return ys[k - 1] + t * (ys[k] - ys[k - 1]);
+}
+
+template <typename Scalar>
+int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out) const noexcept {
+  static_assert(kGratings <= 16, "linked_ holds one bit per grating");
+  float peak = 0.0f;
+  for (float v : shift) {
+    if (std::isfinite(v)) peak = std::max(peak, std::abs(v));
+  }
+  const float level = std::max(static_cast<float>(config_.multi_rel) * peak, static_cast<float>(config_.multi_floor_pm));
+  std::uint32_t moved = 0;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (std::isfinite(shift[i]) && std::abs(shift[i]) >= level) moved |= 1u << i;
+  }
+  if (touches_ && out.located) {
+    // The model's one-touch response: is this one touch? If not, the two-touch fit's places and total force.
+    const TouchVerdict v = touches_->Check(shift, out.y_mm, out.r_deg);
+    if (!v.multiple) return 1;
+    out.multiple = true;
+    const bool cal = std::isfinite(out.cov_yy_mm2);
+    if (v.found == 2) {
+      // One place, the pair's centre of pressure, with the covariance holding both places. The force stays the
+      // networks' reading: the pair's forces are not trusted (a place of weak response explains a few pm with
+      // any force, so a light touch's misfit can fit a pair of 10 N), and the stop rule must not move.
+      const double total = v.touch[0].force_n + v.touch[1].force_n;
+      const double w0 = total > 0 ? v.touch[0].force_n / total : 0.5;
+      const double cy = w0 * v.touch[0].y_mm + (1 - w0) * v.touch[1].y_mm;
+      const double cr = w0 * v.touch[0].r_deg + (1 - w0) * v.touch[1].r_deg;
+      out.y_mm = static_cast<float>(cy);
+      out.r_deg = static_cast<float>(cr);
+      if (cal) {
+        const double m2 = config_.multi_margin_mm * config_.multi_margin_mm;
+        double yy = m2, ya = 0, aa = m2;
+        for (const Touch& t : v.touch) {
+          const double dy = t.y_mm - cy, da = (t.r_deg - cr) * mm_per_deg_;
+          yy += dy * dy;
+          ya += dy * da;
+          aa += da * da;
+        }
+        out.cov_yy_mm2 += static_cast<float>(yy);
+        out.cov_yr_mm2 += static_cast<float>(ya);
+        out.cov_rr_mm2 += static_cast<float>(aa);
+      }
+      return 2;
+    }
+    // Not one touch, and no pair explains it either: somewhere on the patch.
+    if (cal) {
+      out.cov_yy_mm2 += static_cast<float>(half_y_mm_ * half_y_mm_);
+      out.cov_rr_mm2 += static_cast<float>(half_a_mm_ * half_a_mm_);
+    }
+    return 0;
+  }
+  if (moved == 0 || config_.multi_link_mm <= 0) return moved == 0 ? 0 : 1;
+  // Single linkage over at most 16 gratings: grow each group from its first member through linked_.
+  struct Group {
+    double w = 0, y = 0, a = 0;
+  };
+  std::array<Group, kGratings> groups{};
+  int n = 0;
+  std::uint32_t left = moved;
+  while (left != 0) {
+    std::uint32_t group = left & (~left + 1u);  // the lowest grating left
+    std::uint32_t grown = 0;
+    while (grown != group) {
+      grown = group;
+      for (std::size_t i = 0; i < kGratings; ++i) {
+        if (grown & (1u << i)) group |= linked_[i] & moved;
+      }
+    }
+    left &= ~group;
+    Group& g = groups[static_cast<std::size_t>(n++)];
+    for (std::size_t i = 0; i < kGratings; ++i) {
+      if (!(group & (1u << i))) continue;
+      const double w = std::abs(shift[i]);
+      g.w += w;
+      g.y += w * grating_y_mm_[i];
+      g.a += w * grating_a_mm_[i];
+    }
+  }
+  if (n < 2 || !out.located) return n;
+  out.multiple = true;
+  if (!std::isfinite(out.cov_yy_mm2)) return n;  // no calibrated uncertainty: the flag says it
+  // Widen: add every group centre's offset from the reported place as an outer product (then each centre is
+  // within 1 sigma), and the margin in every direction.
+  const double py = out.y_mm, pa = out.r_deg * mm_per_deg_, m2 = config_.multi_margin_mm * config_.multi_margin_mm;
+  double yy = m2, ya = 0, aa = m2;
+  for (int k = 0; k < n; ++k) {
+    const Group& g = groups[static_cast<std::size_t>(k)];
+    const double dy = g.y / g.w - py, da = g.a / g.w - pa;
+    yy += dy * dy;
+    ya += dy * da;
+    aa += da * da;
+  }
+  out.cov_yy_mm2 += static_cast<float>(yy);
+  out.cov_yr_mm2 += static_cast<float>(ya);
+  out.cov_rr_mm2 += static_cast<float>(aa);
+  return n;
 }
 
 template <typename Scalar>
@@ -254,6 +369,8 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   } else {
     out.cov_yy_mm2 = out.cov_yr_mm2 = out.cov_rr_mm2 = kNaN;
   }
+  out.touch_groups = static_cast<std::uint8_t>(Touches(shift, out));
+  if (out.multiple) ++d.counters_.multiple;
   return out;
 }
 

@@ -48,7 +48,8 @@ std::vector<double> Edges(double lo, double hi, int n) {
 
 }  // namespace
 
-decode::ResponseModel FitResponse(const Prepared& p, const patch::PatchSpec& spec, const std::vector<std::int32_t>& test_ids) {
+decode::ResponseModel FitResponse(const Prepared& p, const patch::PatchSpec& spec, const std::vector<std::int32_t>& test_ids,
+                                  const patch::Region* area) {
   const std::set<std::int32_t> test(test_ids.begin(), test_ids.end());
   std::vector<decode::ShiftsPm> s;
   std::vector<float> f, y, r;
@@ -59,7 +60,7 @@ decode::ResponseModel FitResponse(const Prepared& p, const patch::PatchSpec& spe
     y.push_back(p.y_mm[k]);
     r.push_back(p.r_deg[k]);
   }
-  return decode::ResponseModel::Fit(s, f, y, r, spec.indented_area, spec.surface_radius_mm);
+  return decode::ResponseModel::Fit(s, f, y, r, area != nullptr ? *area : spec.indented_area, spec.surface_radius_mm);
 }
 
 Predictions RunDecoder(FrameDecoder& dec, const Prepared& p, const std::vector<std::int32_t>& test_ids,

@@ -308,6 +308,7 @@ void Monitor::OnFrame(const FrameIn& f, Now now, MessageSink& sink) noexcept {
           c.cov_yr_mm2 = Finite(o.cov_yr_mm2);
           c.cov_rr_mm2 = Finite(o.cov_rr_mm2);
         }
+        c.multiple = o.multiple;
       }
       c.onset = o.in_contact && !in_contact_;
       c.released = !o.in_contact;

@@ -29,6 +29,7 @@ void ToProto(const Message& m, const std::string& patch_id, std::uint64_t seq, v
       p->set_uncertainty_calibrated(c.uncertainty);
       p->set_over_range(c.over_range);
       p->set_force_lower_bound_n(c.force_lower_bound_n);
+      p->set_multiple(c.multiple);
       break;
     }
     case Message::Kind::kHeartbeat: {

@@ -23,10 +23,12 @@
 // persistent ones into faults. Model (immutable) and Data (per stream) are separate, as in NetworkDecoder.
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string_view>
 
 #include "ruffini/decode/baseline.h"
 #include "ruffini/decode/network_decoder.h"
+#include "ruffini/decode/touches.h"
 #include "ruffini/patch/spec.h"
 #include "ruffini/v1/model.pb.h"
 
@@ -70,6 +72,17 @@ struct PipelineConfig {
   // Peaks lost at once, while a contact is open, that make a frame over range (a single lost peak is a
   // dimmed grating's dropout and is decoded from the others, as before).
   int over_range_missing = 2;
+  // Two touches (docs/decoders.md, "Two touches"). On a located contact frame, the gratings whose |shift| is
+  // at least multi_rel of the frame's largest (and at least multi_floor_pm) are grouped: two of them are in
+  // one group when their centres lie within multi_link_mm on the surface (single linkage). One touch moves
+  // one group; two or more groups are two or more touches: the frame is flagged `multiple` and its
+  // covariance widened to hold every group's centre (|shift|-weighted) within 1 sigma, plus multi_margin_mm
+  // (a group's centre is not its touch) in every direction. multi_link_mm 0: off. Chosen on validation
+  // presses (docs/decoders.md).
+  double multi_rel = 0.3;
+  double multi_floor_pm = 3.0;
+  double multi_link_mm = 30.0;
+  double multi_margin_mm = 10.0;
 };
 
 struct PipelineOutput {
@@ -87,6 +100,9 @@ struct PipelineOutput {
   // Over range: the frame shows more load than the model knows (valid is false, reason says which evidence);
   // reported as a contact of at least force_n = over_range_force_n, in_contact true, not located.
   bool over_range = false;
+  // Located, and the shifts show more than one touch (PipelineConfig::multi_*): the covariance holds them.
+  bool multiple = false;
+  std::uint8_t touch_groups = 0;  // groups of moved gratings on a located frame (0 when not located)
   Reason reason = Reason::kCapturing;
   std::uint8_t missing = 0;
 };
@@ -95,6 +111,7 @@ struct PipelineOutput {
 struct PipelineCounters {
   std::uint64_t frames = 0, valid = 0, located = 0, onsets = 0;
   std::uint64_t over_range = 0;  // frames reported over range (also counted in invalid[reason])
+  std::uint64_t multiple = 0;    // located frames flagged as more than one touch
   std::array<std::uint64_t, kReasonCount> invalid{};  // indexed by Reason (kOk stays 0)
 };
 
@@ -139,6 +156,9 @@ class Pipeline {
   [[nodiscard]] Reason CheckRaw(const Wavelengths& wl, std::uint32_t flags) const noexcept;
   [[nodiscard]] bool InRange(const ShiftsPm& s) const noexcept;
   [[nodiscard]] float Interp(const std::vector<float>& ys, float x) const noexcept;
+  // Groups the moved gratings of a frame; widens out's covariance (when calibrated) when there are two or
+  // more. Returns the number of groups.
+  int Touches(const ShiftsPm& shift, PipelineOutput& out) const noexcept;
 
   NetworkDecoder<Scalar> decoder_;
   PipelineConfig config_;
@@ -150,6 +170,10 @@ class Pipeline {
   float position_floor_mm2_ = 0.0f;
   double mm_per_deg_ = 0.0;
   int confirm_frames_ = 0;
+  std::optional<TouchCheck> touches_;  // with the model's ResponseMap
+  double half_y_mm_ = 0.0, half_a_mm_ = 0.0;  // half the patch's extent (an unexplained frame's spread)
+  std::array<double, kGratings> grating_y_mm_{}, grating_a_mm_{};  // centres, arc length for R
+  std::array<std::uint16_t, kGratings> linked_{};  // bit j of linked_[i]: gratings i and j within multi_link_mm
   float peak_decay_ = 0.0f;
 };
 

@@ -50,8 +50,10 @@ class InversionFrameDecoder final : public FrameDecoder {
   const decode::InversionDecoder& decoder_;
 };
 
-// The inversion decoder's response map, learned from the frames of every indentation not in `test_ids`.
-decode::ResponseModel FitResponse(const Prepared& data, const patch::PatchSpec& spec, const std::vector<std::int32_t>& test_ids);
+// The inversion decoder's response map, learned from the frames of every indentation not in `test_ids`, on a
+// grid over `area` (nullptr: the spec's indented area).
+decode::ResponseModel FitResponse(const Prepared& data, const patch::PatchSpec& spec, const std::vector<std::int32_t>& test_ids,
+                                  const patch::Region* area = nullptr);
 
 struct Predictions {
   std::vector<float> force_n, y_mm, r_deg;

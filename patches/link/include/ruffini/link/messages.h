@@ -75,6 +75,7 @@ struct Contact {
   std::uint8_t missing = 0;
   bool over_range = false;          // more load than the model knows: force_n is a lower bound
   float force_lower_bound_n = 0.0f;  // with over_range
+  bool multiple = false;            // located, and more than one touch (the covariance holds them)
 };
 
 struct Fault {

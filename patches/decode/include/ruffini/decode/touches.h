@@ -1,0 +1,66 @@
+#pragma once
+// One touch or more (issue 16, docs/decoders.md "Two touches"): is a frame's shift pattern one touch?
+//
+// The paper's networks know one touch: two touches give one place between them (a phantom) or at one of them,
+// with a confident covariance. The check uses the model's ResponseMap (one touch's response, shift_i =
+// F (1 + c F) g_i(Y, R), learned from a recording): near the networks' place it finds the single touch that
+// best explains the shifts (amplitude in closed form at each node of a small window) and measures the misfit,
+// the residual's share of the shifts' energy (with a noise allowance, so a light touch's noise is no misfit).
+// Above the model's limit the frame is not one touch: a two-touch fit (each place searched over the whole map
+// while the other is held, amplitudes by non-negative least squares) then gives both places and forces. The
+// pipeline uses the places only: a place of weak response (far from every grating) explains a few pm with
+// any force, so the pair's forces are no measurement (a light touch's misfit can fit a pair of 10 N).
+//
+// Cost: the single check is a 5 x 5 node window (about 1 us); the two-touch fit, only on frames the check
+// flags, a few passes over the map's nodes. No allocation, no lock, no throw.
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "ruffini/decode/inversion.h"
+#include "ruffini/v1/model.pb.h"
+
+namespace ruffini::decode {
+
+struct Touch {
+  double y_mm = 0.0, r_deg = 0.0, force_n = 0.0;
+};
+
+struct TouchVerdict {
+  double misfit = 0.0;     // the best single touch's misfit near the start (0..1)
+  bool multiple = false;   // misfit above the model's limit: not one touch
+  int found = 0;           // 2: the two-touch fit explains the shifts (touch[0], touch[1]); 0: it does not
+  double misfit_two = 0.0; // the two-touch fit's misfit (with found 2)
+  // found 2: the two touches. Otherwise touch[0] is the best single touch near the start (force 0: none).
+  std::array<Touch, 2> touch{};
+};
+
+class TouchCheck {
+ public:
+  // Throws InputError when the map is malformed (sizes, steps, non-finite values).
+  explicit TouchCheck(const v1::ResponseMap& map);
+  TouchVerdict Check(const ShiftsPm& shift_pm, double y_mm, double r_deg) const noexcept;
+  [[nodiscard]] double limit() const noexcept { return limit_; }
+  [[nodiscard]] const ResponseModel& model() const noexcept { return model_; }
+
+ private:
+  struct Best {
+    int node = -1;
+    double cost = 0.0, a = 0.0;
+  };
+  // The single node of [iy0, iy1] x [ir0, ir1] (step `stride`) whose g explains s best (amplitude >= 0).
+  Best SearchOne(const ShiftsPm& s, int iy0, int iy1, int ir0, int ir1, int stride) const noexcept;
+  // The node (same window) that with the fixed node `other` explains s best; amplitudes >= 0.
+  Best SearchPair(const ShiftsPm& s, int other, int iy0, int iy1, int ir0, int ir1, int stride, double& a_other) const noexcept;
+  [[nodiscard]] double Force(double amplitude) const noexcept;
+  [[nodiscard]] Touch Place(int node, double amplitude) const noexcept;
+
+  ResponseModel model_;
+  double limit_ = 0.0;
+};
+
+// The map as a model file stores it, and back (the fit lives in inversion.h).
+v1::ResponseMap ToProto(const ResponseModel& m, double multiple_misfit, const std::string& source);
+ResponseModel FromProto(const v1::ResponseMap& map);
+
+}  // namespace ruffini::decode

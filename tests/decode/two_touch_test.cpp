@@ -1,0 +1,171 @@
+// Two touches on one patch (issue 16): the decoder never reports two touches as one confident place. Through
+// the twin, the Hyperion bytes, the ingest codec, link::Monitor and the shipped cobot forearm model
+// (tests/decode/hard_press.h), and the TouchCheck alone on a synthetic response map.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "ruffini/decode/touches.h"
+#include "ruffini/error.h"
+#include "two_touch.h"
+
+namespace ruffini::testing {
+namespace {
+
+struct Shipped {
+  twin::Scene scene = twin::LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/cobot.yaml");
+  std::size_t patch = 0;
+  v1::DecoderModel model;
+  Shipped() {
+    while (scene.patches[patch].name != "forearm_a") ++patch;
+    model = decode::LoadModel(scene.patches[patch].model_path);
+  }
+};
+const Shipped& Get() {
+  static const Shipped s;
+  return s;
+}
+
+// 2 N on FBG 1 and 2 N on FBG 13, 82 mm apart: the paper networks alone read about 2.8 N at one place between
+// them. Every located frame of the hold is flagged and holds both touches within 3 sigma. The force stays the
+// networks' reading (touches.h says why), so the stop rule is the same with or without the check.
+TEST(TwoTouches, TwoTouchesFarApartAreFlaggedAndCovered) {
+  const Shipped& s = Get();
+  ASSERT_TRUE(s.model.has_response()) << "the shipped forearm model carries its response map";
+  HardPressRig rig(s.scene, s.patch, s.model);
+  const ProbeAt p[2] = {{24.0, 42.5, 2.0}, {100.0, 102.5, 2.0}};
+  const PressOutcome o = rig.Press(std::span<const ProbeAt>(p, 2), 1.5);
+  const PressJudgement j = JudgePress(o, p, MmPerDeg(s.scene, s.patch));
+  ASSERT_GT(j.located, 100);
+  EXPECT_EQ(j.confident_wrong, 0) << j.flagged << " of " << j.located << " flagged";
+  EXPECT_GE(j.flagged, j.located * 9 / 10);
+}
+
+// The same press, one touch: never flagged, placed as before.
+TEST(TwoTouches, OneTouchIsNotFlagged) {
+  const Shipped& s = Get();
+  HardPressRig rig(s.scene, s.patch, s.model);
+  for (const ProbeAt& p : {ProbeAt{24.0, 42.5, 2.0}, ProbeAt{75.0, 72.5, 1.0}, ProbeAt{100.0, 102.5, 3.0}}) {
+    const PressOutcome o = rig.Press(std::span<const ProbeAt>(&p, 1), 1.5);
+    const PressJudgement j = JudgePress(o, std::span<const ProbeAt>(&p, 1), MmPerDeg(s.scene, s.patch));
+    ASSERT_GT(j.located, 100);
+    EXPECT_EQ(j.flagged, 0) << p.y_mm << ", " << p.r_deg;
+  }
+}
+
+// The check never moves the force: a light press between two rows (where a misfit is likeliest) and a pair
+// read the same forces, frame by frame, with and without the response map.
+TEST(TwoTouches, TheCheckNeverChangesTheForce) {
+  const Shipped& s = Get();
+  v1::DecoderModel bare = s.model;
+  bare.clear_response();
+  HardPressRig with(s.scene, s.patch, s.model), without(s.scene, s.patch, bare);
+  const ProbeAt light{75.0, 72.5, 1.0};
+  const ProbeAt pair[2] = {{24.0, 42.5, 2.0}, {100.0, 102.5, 2.0}};
+  for (const std::span<const ProbeAt> probes : {std::span<const ProbeAt>(&light, 1), std::span<const ProbeAt>(pair, 2)}) {
+    const PressOutcome a = with.Press(probes, 1.5), b = without.Press(probes, 1.5);
+    ASSERT_EQ(a.hold.size(), b.hold.size());
+    for (std::size_t k = 0; k < a.hold.size(); ++k) ASSERT_EQ(a.hold[k].force_n, b.hold[k].force_n) << k;
+    EXPECT_EQ(a.max_force_n, b.max_force_n);
+  }
+}
+
+// Without a response map the gratings' groups still flag two touches on gratings far apart.
+TEST(TwoTouches, WithoutAResponseMapTheGratingsGroupsFlagThem) {
+  const Shipped& s = Get();
+  v1::DecoderModel bare = s.model;
+  bare.clear_response();
+  HardPressRig rig(s.scene, s.patch, bare);
+  const ProbeAt p[2] = {{24.0, 42.5, 2.0}, {100.0, 102.5, 2.0}};
+  const PressOutcome o = rig.Press(std::span<const ProbeAt>(p, 2), 1.5);
+  const PressJudgement j = JudgePress(o, p, MmPerDeg(s.scene, s.patch));
+  ASSERT_GT(j.located, 100);
+  EXPECT_GE(j.flagged, j.located * 9 / 10);
+  EXPECT_EQ(j.confident_wrong, 0);
+}
+
+// The check alone, on a synthetic map: one Gaussian bump of sensitivity per grating.
+v1::ResponseMap SyntheticMap(double misfit) {
+  decode::ResponseModel m;
+  m.y0_mm = 0;
+  m.r0_deg = 0;
+  m.dy_mm = 2;
+  m.dr_deg = 2;
+  m.ny = 51;
+  m.nr = 51;
+  m.g.resize(static_cast<std::size_t>(m.ny * m.nr));
+  for (int iy = 0; iy < m.ny; ++iy) {
+    for (int ir = 0; ir < m.nr; ++ir) {
+      for (std::size_t i = 0; i < 16; ++i) {
+        const double gy = 12.0 + 25.0 * static_cast<double>(i % 4), gr = 12.0 + 25.0 * static_cast<double>(i / 4);
+        const double d2 = std::pow(iy * 2.0 - gy, 2) + std::pow(ir * 2.0 - gr, 2);
+        m.g[static_cast<std::size_t>(iy * m.nr + ir)][i] = static_cast<float>(100.0 * std::exp(-d2 / (2 * 10.0 * 10.0)));
+      }
+    }
+  }
+  return decode::ToProto(m, misfit, "test");
+}
+
+decode::ShiftsPm Shifts(const decode::ResponseModel& m, std::initializer_list<decode::Touch> touches) {
+  decode::ShiftsPm s{};
+  for (const decode::Touch& t : touches) {
+    std::array<double, 16> g{};
+    m.Eval(t.y_mm, t.r_deg, g);
+    for (std::size_t i = 0; i < 16; ++i) s[i] += static_cast<float>(t.force_n * g[i]);
+  }
+  return s;
+}
+
+TEST(TouchCheck, OneTouchPassesTwoAreFoundWithTheirForces) {
+  const decode::TouchCheck check(SyntheticMap(0.05));
+  const decode::ResponseModel& m = check.model();
+  const decode::TouchVerdict one = check.Check(Shifts(m, {{40, 40, 2.0}}), 41, 39);
+  EXPECT_FALSE(one.multiple);
+  EXPECT_LT(one.misfit, 0.01);
+  const decode::TouchVerdict two = check.Check(Shifts(m, {{20, 20, 2.0}, {80, 70, 1.5}}), 50, 45);
+  ASSERT_TRUE(two.multiple);
+  ASSERT_EQ(two.found, 2);
+  EXPECT_LT(two.misfit_two, 0.01);
+  // Either order; places to a node, forces to 5 %.
+  const bool swapped = two.touch[0].y_mm > two.touch[1].y_mm;
+  const decode::Touch& a = two.touch[swapped ? 1 : 0];
+  const decode::Touch& b = two.touch[swapped ? 0 : 1];
+  EXPECT_NEAR(a.y_mm, 20, 2.1);
+  EXPECT_NEAR(a.r_deg, 20, 2.1);
+  EXPECT_NEAR(a.force_n, 2.0, 0.1);
+  EXPECT_NEAR(b.y_mm, 80, 2.1);
+  EXPECT_NEAR(b.r_deg, 70, 2.1);
+  EXPECT_NEAR(b.force_n, 1.5, 0.075);
+}
+
+TEST(TouchCheck, MissingPeaksAndNoSignalAreNoMisfitAndNoNaN) {
+  const decode::TouchCheck check(SyntheticMap(0.05));
+  decode::ShiftsPm s = Shifts(check.model(), {{40, 40, 2.0}});
+  s[3] = std::nanf("");
+  s[7] = std::nanf("");
+  const decode::TouchVerdict v = check.Check(s, 40, 40);
+  EXPECT_FALSE(v.multiple);
+  EXPECT_TRUE(std::isfinite(v.misfit));
+  const decode::TouchVerdict zero = check.Check(decode::ShiftsPm{}, 40, 40);
+  EXPECT_FALSE(zero.multiple);
+  decode::ShiftsPm dark{};
+  for (float& x : dark) x = std::nanf("");
+  EXPECT_FALSE(check.Check(dark, 40, 40).multiple);
+}
+
+TEST(TouchCheck, AMalformedMapIsRefusedWithItsReason) {
+  v1::ResponseMap m = SyntheticMap(0.05);
+  m.mutable_g_pm_per_n()->RemoveLast();
+  EXPECT_THROW({ decode::TouchCheck c(m); }, InputError);
+  m = SyntheticMap(0.05);
+  m.set_g_pm_per_n(5, std::nanf(""));
+  EXPECT_THROW({ decode::TouchCheck c(m); }, InputError);
+  m = SyntheticMap(1.5);
+  EXPECT_THROW({ decode::TouchCheck c(m); }, InputError);
+  m = SyntheticMap(0.05);
+  m.set_dy_mm(0);
+  EXPECT_THROW({ decode::TouchCheck c(m); }, InputError);
+}
+
+}  // namespace
+}  // namespace ruffini::testing
