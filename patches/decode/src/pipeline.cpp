@@ -83,6 +83,8 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
     throw InputError("pipeline: multi_rel must be in (0, 1], multi_floor_pm, multi_link_mm and multi_margin_mm >= 0");
   }
   if (m.has_response()) touches_.emplace(m.response());
+  if (!(config_.multi_refit_s >= 0 && config_.multi_refit_s <= 1)) throw InputError("pipeline: multi_refit_s must be 0..1 s");
+  refit_frames_ = static_cast<int>(std::lround(config_.multi_refit_s * config_.baseline.sample_rate_hz));
   half_y_mm_ = 0.5 * spec.extent_y_mm;
   half_a_mm_ = 0.5 * spec.extent_r_deg * mm_per_deg_;
   for (std::size_t i = 0; i < kGratings; ++i) {
@@ -155,7 +157,7 @@ float Pipeline<Scalar>::Interp(const std::vector<float>& ys, float x) const noex
 }
 
 template <typename Scalar>
-int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out) const noexcept {
+int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& d) const noexcept {
   static_assert(kGratings <= 16, "linked_ holds one bit per grating");
   float peak = 0.0f;
   for (float v : shift) {
@@ -168,8 +170,20 @@ int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out) const 
   }
   if (touches_ && out.located) {
     // The model's one-touch response: is this one touch? If not, the two-touch fit's places and total force.
-    const TouchVerdict v = touches_->Check(shift, out.y_mm, out.r_deg);
-    if (!v.multiple) return 1;
+    const bool refit = d.pair_age_ >= refit_frames_;
+    TouchVerdict v = touches_->Check(shift, out.y_mm, out.r_deg, refit);
+    if (!v.multiple) {
+      d.pair_age_ = 1 << 30;
+      return 1;
+    }
+    if (refit) {
+      d.pair_ = v;
+      d.pair_age_ = 0;
+    } else {
+      ++d.pair_age_;
+      v.found = d.pair_.found;
+      v.touch = d.pair_.touch;
+    }
     out.multiple = true;
     const bool cal = std::isfinite(out.cov_yy_mm2);
     if (v.found == 2) {
@@ -353,6 +367,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   out.force_sd_n = cal ? Interp(force_sd_, o.force_n) : kNaN;
   out.located = o.located && contact;
   if (!out.located) {
+    d.pair_age_ = 1 << 30;  // a later flagged frame fits afresh
     out.y_mm = out.r_deg = kNaN;
     out.cov_yy_mm2 = out.cov_yr_mm2 = out.cov_rr_mm2 = kNaN;
     return out;
@@ -369,7 +384,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   } else {
     out.cov_yy_mm2 = out.cov_yr_mm2 = out.cov_rr_mm2 = kNaN;
   }
-  out.touch_groups = static_cast<std::uint8_t>(Touches(shift, out));
+  out.touch_groups = static_cast<std::uint8_t>(Touches(shift, out, d));
   if (out.multiple) ++d.counters_.multiple;
   return out;
 }

@@ -111,7 +111,7 @@ double TouchCheck::Force(double amplitude) const noexcept {
   return disc > 0 ? (std::sqrt(disc) - 1.0) / (2.0 * c) : amplitude;
 }
 
-TouchVerdict TouchCheck::Check(const ShiftsPm& shift, double y_mm, double r_deg) const noexcept {
+TouchVerdict TouchCheck::Check(const ShiftsPm& shift, double y_mm, double r_deg, bool fit_pair) const noexcept {
   TouchVerdict v;
   const Frame f = Prepare(shift);
   if (limit_ <= 0 || f.n < 4 || model_.g.empty()) return v;
@@ -123,6 +123,7 @@ TouchVerdict TouchCheck::Check(const ShiftsPm& shift, double y_mm, double r_deg)
   if (one.node >= 0) v.touch[0] = Place(one.node, one.a);
   if (v.misfit <= limit_) return v;
   v.multiple = true;
+  if (!fit_pair) return v;
   // Two touches: start from the best single touch anywhere, then search each place with the other held
   // (over the map every kStride nodes, then refined), keeping a move only when it lowers the cost.
   const Best first = SearchOne(shift, 0, model_.ny - 1, 0, model_.nr - 1, kStride);

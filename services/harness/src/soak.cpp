@@ -490,17 +490,7 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
   const int stream_port = sim.WaitPort((run / "sim" / "ports").string(), "stream", 30s);
   if (stream_port == 0) throw InputError("ruffini-sim did not start: " + sim.stderr_text());
   // The sim's sample 0 on the Unix clock (it logs it): the scenario's time 0.
-  std::int64_t sim_t0 = 0;
-  {
-    const auto deadline = Clock::now() + 10s;
-    while (sim_t0 == 0 && Clock::now() < deadline) {
-      const std::string err = sim.stderr_text();
-      const auto at = err.find("sample 0 is at Unix time ");
-      if (at != std::string::npos) sim_t0 = std::strtoll(err.c_str() + at + 25, nullptr, 10);
-      if (sim_t0 == 0) std::this_thread::sleep_for(10ms);
-    }
-    if (sim_t0 == 0) throw InputError("ruffini-sim did not log its clock ('sample 0 is at Unix time'): " + sim.stderr_text());
-  }
+  const std::int64_t sim_t0 = SimSampleZeroNs([&] { return sim.stderr_text(); }, 10s);
   auto unix_of = [&](double sim_s) { return sim_t0 + static_cast<std::int64_t>(sim_s * 1e9); };
   auto now_s = [&] { return static_cast<double>(service::UnixNowNs() - sim_t0) / 1e9; };
 
@@ -605,7 +595,13 @@ SoakResult RunSoak(const SoakOptions& o, const std::function<void(const std::str
       const double down_s = 0.5 + 1.5 * u(rng);
       std::vector<std::size_t> candidates;
       for (std::size_t i = 0; i < patches.size(); ++i) {
-        if (!patch_pressed(i, t - 0.5, t + down_s + 4.0) && decoders[i] && decoders[i]->Running()) candidates.push_back(i);
+        // Started: it has logged its first line, after it blocked the stop signals (decoder/main.cpp). A SIGTERM
+        // before that ends it by the signal's default action, no crash of the decoder (a loaded CI machine
+        // restarted one and killed it again before it ran).
+        const bool settled = decoders[i] && !decoders[i]->stderr_text().empty();
+        if (!patch_pressed(i, t - 0.5, t + down_s + 4.0) && decoders[i] && decoders[i]->Running() && settled) {
+          candidates.push_back(i);
+        }
       }
       if (!candidates.empty()) {
         const std::size_t i = candidates[static_cast<std::size_t>(u(rng) * static_cast<double>(candidates.size())) % candidates.size()];

@@ -83,6 +83,9 @@ struct PipelineConfig {
   double multi_floor_pm = 3.0;
   double multi_link_mm = 30.0;
   double multi_margin_mm = 10.0;
+  // While frames stay flagged, the two-touch fit (about 100 us) runs once every multi_refit_s; the frames in
+  // between reuse its places. 0: every frame.
+  double multi_refit_s = 0.01;
 };
 
 struct PipelineOutput {
@@ -140,6 +143,8 @@ class Pipeline {
     bool contact_ = false;  // the reported contact (the gate, confirmed)
     bool over_range_ = false;  // the last frame was over range
     float recent_peak_pm_ = 0.0f;  // largest |shift| lately, decaying (quiet release after a drop)
+    TouchVerdict pair_;            // the last two-touch fit, reused for multi_refit_s while the flag holds
+    int pair_age_ = 1 << 30;       // frames since it (large: none)
   };
 
   // One interrogator frame. Real-time safe: no allocation, no lock, no throw.
@@ -158,7 +163,7 @@ class Pipeline {
   [[nodiscard]] float Interp(const std::vector<float>& ys, float x) const noexcept;
   // Groups the moved gratings of a frame; widens out's covariance (when calibrated) when there are two or
   // more. Returns the number of groups.
-  int Touches(const ShiftsPm& shift, PipelineOutput& out) const noexcept;
+  int Touches(const ShiftsPm& shift, PipelineOutput& out, Data& d) const noexcept;
 
   NetworkDecoder<Scalar> decoder_;
   PipelineConfig config_;
@@ -171,6 +176,7 @@ class Pipeline {
   double mm_per_deg_ = 0.0;
   int confirm_frames_ = 0;
   std::optional<TouchCheck> touches_;  // with the model's ResponseMap
+  int refit_frames_ = 0;               // multi_refit_s in frames
   double half_y_mm_ = 0.0, half_a_mm_ = 0.0;  // half the patch's extent (an unexplained frame's spread)
   std::array<double, kGratings> grating_y_mm_{}, grating_a_mm_{};  // centres, arc length for R
   std::array<std::uint16_t, kGratings> linked_{};  // bit j of linked_[i]: gratings i and j within multi_link_mm

@@ -39,7 +39,9 @@ class TouchCheck {
  public:
   // Throws InputError when the map is malformed (sizes, steps, non-finite values).
   explicit TouchCheck(const v1::ResponseMap& map);
-  TouchVerdict Check(const ShiftsPm& shift_pm, double y_mm, double r_deg) const noexcept;
+  // fit_pair false: a frame flagged multiple gets no two-touch fit (found stays 0; the caller reuses a recent
+  // one). The fit is the check's costly part (about 100 us).
+  TouchVerdict Check(const ShiftsPm& shift_pm, double y_mm, double r_deg, bool fit_pair = true) const noexcept;
   [[nodiscard]] double limit() const noexcept { return limit_; }
   [[nodiscard]] const ResponseModel& model() const noexcept { return model_; }
 
