@@ -259,8 +259,9 @@ void RegisterEvaluate(CLI::App& app) {
                 100.0 * sm.miss_rate_above_100mn, 100.0 * sm.false_contact_rate);
     for (const auto& [zone, z] : {std::pair{"within 10 mm of an edge", &sm.near_edge}, std::pair{"interior", &sm.interior}}) {
       std::printf("pressed frames %s: %zu, force %.1f mN, reported/true above 1 N %.2f, location %.2f mm (misses as failures), "
-                  "%.2f mm located only, not located %.1f %%, over range %.1f %%\n",
+                  "%.2f mm located only, %.2f mm above 1 N (misses as failures), not located %.1f %%, over range %.1f %%\n",
                   zone, z->frames, z->force_mn.median, z->force_ratio_above_1n, z->location_mm.median, z->location_located_mm.median,
+                  z->location_above_1n_mm.median,
                   100.0 * static_cast<double>(z->missed) / std::max<double>(1.0, static_cast<double>(z->frames)),
                   100.0 * static_cast<double>(z->over_range) / std::max<double>(1.0, static_cast<double>(z->frames)));
     }

@@ -222,6 +222,8 @@ TEST(ScoreStreamTest, PressesNearAnEdgeAreScoredApart) {
   EXPECT_NEAR(m.near_edge.force_ratio_above_1n, 0.5, 1e-6);
   EXPECT_NEAR(m.interior.force_ratio_above_1n, 1.0, 1e-6);
   EXPECT_EQ(m.near_edge.frames_above_1n, 2u * 49u);  // 1.02 .. 1.98 N
+  EXPECT_NEAR(m.near_edge.location_above_1n_mm.median, 12.0, 1e-4);
+  EXPECT_NEAR(m.interior.location_above_1n_mm.median, 0.0, 1e-4);
   EXPECT_GT(m.near_edge.force_mn.median, 100.0);
   EXPECT_NEAR(m.interior.force_mn.median, 0.0, 1e-3);
   EXPECT_EQ(m.near_edge.missed, 0u);

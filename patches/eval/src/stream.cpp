@@ -117,7 +117,7 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
   std::size_t above100 = 0, missed100 = 0;
   std::size_t f1 = 0, f2 = 0, p1 = 0, p2 = 0;
   struct ZoneData {
-    std::vector<double> force, location, located, ratio;
+    std::vector<double> force, location, located, ratio, location_1n;
   } zone_edge, zone_in;
   for (std::size_t k = 0; k < d.size(); ++k) {
     if (!mask.empty() && !mask[k]) continue;
@@ -185,7 +185,10 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
       zd.force.push_back(fe);
       zd.location.push_back(le);
       if (located) zd.located.push_back(le);
-      if (ref > 1.0) zd.ratio.push_back(pred / ref);
+      if (ref > 1.0) {
+        zd.ratio.push_back(pred / ref);
+        zd.location_1n.push_back(le);
+      }
       if (ref > 0.1) {
         ++above100;
         missed100 += !located;
@@ -211,6 +214,7 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
     zone->location_mm = stats::Summarize(zd->location);
     zone->location_located_mm = stats::Summarize(zd->located);
     zone->frames_above_1n = zd->ratio.size();
+    zone->location_above_1n_mm = stats::Summarize(zd->location_1n);
     zone->force_ratio_above_1n = zd->ratio.empty() ? kNaN : stats::Median(zd->ratio);
   }
   m.force_all_mn = stats::Summarize(f_all);
@@ -262,14 +266,15 @@ std::string EdgeZoneTable(const std::vector<std::pair<std::string, const StreamM
   std::ostringstream o;
   const auto s = [](const stats::Summary& v, const char* fmt) { return F(fmt, v.median) + " (" + F(fmt, v.iqr()) + ")"; };
   o << "| data | zone | pressed frames (> 50 mN) | force error, median (IQR) mN | reported / true force above 1 N, median | "
-       "location, misses as failures: median (IQR) mm | located only | not located | over range |\n"
-       "|---|---|---|---|---|---|---|---|---|\n";
+       "location, misses as failures: median (IQR) mm | located only | above 1 N, misses as failures | not located | over range |\n"
+       "|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& [name, m] : rows) {
     for (const auto& [zone_name, z] : {std::pair{F("within %.0f mm of an edge", StreamMetrics::kEdgeBandMm), &m->near_edge},
                                       std::pair{std::string("interior"), &m->interior}}) {
       o << "| " << name << " | " << zone_name << " | " << z->frames << " | " << s(z->force_mn, "%.1f") << " | "
         << (std::isfinite(z->force_ratio_above_1n) ? F("%.2f", z->force_ratio_above_1n) : std::string("-")) << " | "
         << s(z->location_mm, "%.2f") << " | " << s(z->location_located_mm, "%.2f") << " | "
+        << (z->frames_above_1n ? s(z->location_above_1n_mm, "%.2f") : std::string("-")) << " | "
         << F("%.1f %%", 100.0 * static_cast<double>(z->missed) / std::max<double>(1.0, static_cast<double>(z->frames))) << " | "
         << F("%.1f %%", 100.0 * static_cast<double>(z->over_range) / std::max<double>(1.0, static_cast<double>(z->frames))) << " |\n";
     }

@@ -59,6 +59,8 @@ struct EdgeZone {
   // Median of reported / true force over the zone's frames above 1 N (below 1: read too light). NaN: none.
   double force_ratio_above_1n = std::numeric_limits<double>::quiet_NaN();
   std::size_t frames_above_1n = 0;
+  // Location over the zone's frames above 1 N (a press the region thresholds care about): misses as failures.
+  stats::Summary location_above_1n_mm{};
 };
 
 struct StreamMetrics {
