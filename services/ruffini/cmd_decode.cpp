@@ -257,6 +257,12 @@ void RegisterEvaluate(CLI::App& app) {
                 "%.2f mm located only; miss rate above 100 mN %.2f %%; false contacts %.3f %%\n",
                 sm.force_all_mn.median, sm.force_all_loadcell_mn.median, sm.force_above_mn.median, sm.location_above_mm.median, sm.location_located_mm.median,
                 100.0 * sm.miss_rate_above_100mn, 100.0 * sm.false_contact_rate);
+    for (std::size_t r = 1; r < rows.size(); ++r) {
+      const std::string& label = also_labels[r - 1];
+      const eval::StreamMetrics& om = rows[r].scored;
+      std::printf("%s: force %.1f mN all, %.1f mN above 50 mN; location %.2f mm; false contacts %.3f %%\n", label.c_str(),
+                  om.force_all_mn.median, om.force_above_mn.median, om.location_above_mm.median, 100.0 * om.false_contact_rate);
+    }
     for (const auto& [zone, z] : {std::pair{"within 10 mm of an edge", &sm.near_edge}, std::pair{"interior", &sm.interior}}) {
       std::printf("pressed frames %s: %zu, force %.1f mN, reported/true above 1 N %.2f, location %.2f mm (misses as failures), "
                   "%.2f mm located only, %.2f mm above 1 N (misses as failures), not located %.1f %%, over range %.1f %%\n",
@@ -264,12 +270,6 @@ void RegisterEvaluate(CLI::App& app) {
                   z->location_above_1n_mm.median,
                   100.0 * static_cast<double>(z->missed) / std::max<double>(1.0, static_cast<double>(z->frames)),
                   100.0 * static_cast<double>(z->over_range) / std::max<double>(1.0, static_cast<double>(z->frames)));
-    }
-    for (std::size_t r = 1; r < rows.size(); ++r) {
-      const std::string& label = also_labels[r - 1];
-      const eval::StreamMetrics& om = rows[r].scored;
-      std::printf("%s: force %.1f mN all, %.1f mN above 50 mN; location %.2f mm; false contacts %.3f %%\n", label.c_str(),
-                  om.force_all_mn.median, om.force_above_mn.median, om.location_above_mm.median, 100.0 * om.false_contact_rate);
     }
     std::printf("test set: force %.1f mN (IQR %.1f), location %.2f mm (IQR %.2f); report in %s/report.md\n",
                 ev.force_error_mn.median, ev.force_error_mn.iqr(), ev.location_error_mm.median, ev.location_error_mm.iqr(),

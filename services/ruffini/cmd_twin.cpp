@@ -74,6 +74,7 @@ void RegisterSimulate(CLI::App& app) {
     double step_mm = 2.0;
     double duration_s = twin::FieldProtocol{}.duration_s;
     double rate_hz = twin::FieldProtocol{}.rate_hz;
+    double force_min_n = twin::CoverageProtocol{}.force_min_n;
     double force_max_n = twin::CoverageProtocol{}.force_max_n;
     double edge_fraction = twin::CoverageProtocol{}.edge_fraction;
     double edge_band_mm = twin::CoverageProtocol{}.edge_band_mm;
@@ -92,6 +93,8 @@ void RegisterSimulate(CLI::App& app) {
   cmd->add_option("--duration-s", args->duration_s, "field: length of the recording")
       ->check(CLI::Range(1.0, 1e7))->capture_default_str();
   cmd->add_option("--rate-hz", args->rate_hz, "field: frame rate")->check(CLI::Range(1.0, 100000.0))->capture_default_str();
+  cmd->add_option("--force-min-n", args->force_min_n, "coverage: smallest peak force (peaks are log-uniform between the two)")
+      ->check(CLI::Range(1e-4, 1000.0))->capture_default_str();
   cmd->add_option("--force-max-n", args->force_max_n,
                   "coverage: largest peak force (0: the contact law's linear limit, beyond which frames are over range)")
       ->check(CLI::Range(0.0, 1000.0))->capture_default_str();
@@ -124,6 +127,7 @@ void RegisterSimulate(CLI::App& app) {
     } else if (args->protocol == "coverage") {
       twin::CoverageProtocol p;
       if (args->indentations) p.indentations = *args->indentations;
+      p.force_min_n = args->force_min_n;
       p.force_max_n = args->force_max_n;
       p.edge_fraction = args->edge_fraction;
       p.edge_band_mm = args->edge_band_mm;
