@@ -4,7 +4,7 @@
 # validation data, scored beside the shipped forearm.rmodel on the same test data, and its sensitivity map.
 # Run from the repository root after `cmake --workflow --preset release`.
 # Usage: docs/experiments/whole-surface.sh [RUFFINI_BINARY] [OUT_DIR]
-#   (about 75 min on 2 busy cores: two trainings of 10-15 min, the sensitivity map 16 min with one thread)
+#   (about 90 min on 2 busy cores: three trainings of 10-15 min, two sensitivity maps of about 9 min)
 set -euo pipefail
 B=${1:-build/release/bin/ruffini}
 out=${2:-whole-surface-experiment}
@@ -49,6 +49,8 @@ for m in "$out/whole.rmodel" "$out/whole_f1.rmodel" config/models/forearm.rmodel
   done
 done
 
-# The sensitivity map where the shipped one was measured (docs/coverage.md).
-$B sensitivity --scene config/scenes/cobot.yaml --patch upper_arm_a --model "$out/whole.rmodel" \
-  --out "$out/whole-map.rmodel" --report "$out/sens-whole" --threads 2
+# The sensitivity maps where the shipped one was measured (docs/coverage.md); whole_f1 is the candidate.
+for m in whole whole_f1; do
+  $B sensitivity --scene config/scenes/cobot.yaml --patch upper_arm_a --model "$out/$m.rmodel" \
+    --out "$out/$m-map.rmodel" --report "$out/sens-$m" --threads 2
+done
