@@ -66,6 +66,9 @@ void RegisterTrain(CLI::App& app) {
       ->check(CLI::Range(0.0, 100.0))->capture_default_str();
   cmd->add_option("--unit-floor-pm", a->o.unit_floor_pm, "unit: norms below this (pm) are taken as this")
       ->check(CLI::Range(1e-3, 1e3))->capture_default_str();
+  cmd->add_option("--area", a->o.area,
+                  "What the location grids span: indented (the paper's grids over the spec's indented area) | whole (the patch's full extent, cells of the paper's size)")
+      ->check(CLI::IsMember({"indented", "whole"}))->capture_default_str();
   cmd->add_option("--folds", a->o.folds, "Cross-validation folds inside the training part (0 = none)")->check(CLI::Range(0, 20))->capture_default_str();
   cmd->add_option("--seed", a->o.seed, "Seed (split, initialisation, sampling)")->capture_default_str();
   cmd->add_option("--threads", a->o.threads, "Fits trained at once (CV folds and the final fit), one core each")->check(CLI::Range(1, 64))->capture_default_str();
@@ -260,6 +263,14 @@ void RegisterEvaluate(CLI::App& app) {
       const eval::StreamMetrics& om = rows[r].scored;
       std::printf("%s: force %.1f mN all, %.1f mN above 50 mN; location %.2f mm; false contacts %.3f %%\n", label.c_str(),
                   om.force_all_mn.median, om.force_above_mn.median, om.location_above_mm.median, 100.0 * om.false_contact_rate);
+    }
+    for (const auto& [zone, z] : {std::pair{"within 10 mm of an edge", &sm.near_edge}, std::pair{"interior", &sm.interior}}) {
+      std::printf("pressed frames %s: %zu, force %.1f mN, reported/true above 1 N %.2f, location %.2f mm (misses as failures), "
+                  "%.2f mm located only, %.2f mm above 1 N (misses as failures), not located %.1f %%, over range %.1f %%\n",
+                  zone, z->frames, z->force_mn.median, z->force_ratio_above_1n, z->location_mm.median, z->location_located_mm.median,
+                  z->location_above_1n_mm.median,
+                  100.0 * static_cast<double>(z->missed) / std::max<double>(1.0, static_cast<double>(z->frames)),
+                  100.0 * static_cast<double>(z->over_range) / std::max<double>(1.0, static_cast<double>(z->frames)));
     }
     std::printf("test set: force %.1f mN (IQR %.1f), location %.2f mm (IQR %.2f); report in %s/report.md\n",
                 ev.force_error_mn.median, ev.force_error_mn.iqr(), ev.location_error_mm.median, ev.location_error_mm.iqr(),

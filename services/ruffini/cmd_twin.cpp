@@ -74,20 +74,34 @@ void RegisterSimulate(CLI::App& app) {
     double step_mm = 2.0;
     double duration_s = twin::FieldProtocol{}.duration_s;
     double rate_hz = twin::FieldProtocol{}.rate_hz;
+    double force_min_n = twin::CoverageProtocol{}.force_min_n;
+    double force_max_n = twin::CoverageProtocol{}.force_max_n;
+    double edge_fraction = twin::CoverageProtocol{}.edge_fraction;
+    double edge_band_mm = twin::CoverageProtocol{}.edge_band_mm;
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("simulate", "Run a protocol on the skin twin and write an HDF5 dataset");
   AddSceneOptions(cmd, args->scene);
-  cmd->add_option("--protocol", args->protocol, "paper | vonfrey | receptive-field | field")
-      ->check(CLI::IsMember({"paper", "vonfrey", "receptive-field", "field"}))
+  cmd->add_option("--protocol", args->protocol,
+                  "paper | coverage (the paper's ramps over the whole patch, edge to edge) | vonfrey | receptive-field | field")
+      ->check(CLI::IsMember({"paper", "coverage", "vonfrey", "receptive-field", "field"}))
       ->capture_default_str();
   cmd->add_option("--seed", args->seed, "Seed: the same seed gives a bit-identical file")
       ->check(CLI::NonNegativeNumber)->capture_default_str();
-  cmd->add_option("--indentations", args->indentations, "paper: number of indentations (default 2700)")
+  cmd->add_option("--indentations", args->indentations, "paper, coverage: number of indentations (default 2700)")
       ->check(CLI::Range(1, 1000000));
   cmd->add_option("--duration-s", args->duration_s, "field: length of the recording")
       ->check(CLI::Range(1.0, 1e7))->capture_default_str();
   cmd->add_option("--rate-hz", args->rate_hz, "field: frame rate")->check(CLI::Range(1.0, 100000.0))->capture_default_str();
+  cmd->add_option("--force-min-n", args->force_min_n, "coverage: smallest peak force (peaks are log-uniform between the two)")
+      ->check(CLI::Range(1e-4, 1000.0))->capture_default_str();
+  cmd->add_option("--force-max-n", args->force_max_n,
+                  "coverage: largest peak force (0: the contact law's linear limit, beyond which frames are over range)")
+      ->check(CLI::Range(0.0, 1000.0))->capture_default_str();
+  cmd->add_option("--edge-fraction", args->edge_fraction, "coverage: share of presses drawn within --edge-band-mm of an edge")
+      ->check(CLI::Range(0.0, 1.0))->capture_default_str();
+  cmd->add_option("--edge-band-mm", args->edge_band_mm, "coverage: width of the edge band")
+      ->check(CLI::Range(0.1, 1000.0))->capture_default_str();
   cmd->add_option("--step-mm", args->step_mm, "receptive-field: grid step")->check(CLI::Range(0.2, 50.0))->capture_default_str();
   cmd->add_option("--compression", args->compression, "0 none, 1..9 shuffle+deflate")->check(CLI::Range(0, 9))->capture_default_str();
   cmd->add_option("--out", args->out, "Output dataset (.h5)")->required();
@@ -110,6 +124,17 @@ void RegisterSimulate(CLI::App& app) {
       rate = p.rate_hz;
       open(rate);
       run = twin::RunPaper(*twin, scene, p, args->seed, sink, Bar(bar, "indentations"));
+    } else if (args->protocol == "coverage") {
+      twin::CoverageProtocol p;
+      if (args->indentations) p.indentations = *args->indentations;
+      p.force_min_n = args->force_min_n;
+      p.force_max_n = args->force_max_n;
+      p.edge_fraction = args->edge_fraction;
+      p.edge_band_mm = args->edge_band_mm;
+      p.Validate();
+      rate = p.rate_hz;
+      open(rate);
+      run = twin::RunCoverage(*twin, scene, p, args->seed, sink, Bar(bar, "indentations"));
     } else if (args->protocol == "vonfrey") {
       twin::VonFreyProtocol p;
       rate = p.rate_hz;

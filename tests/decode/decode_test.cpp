@@ -52,6 +52,51 @@ TEST(GridsTest, PaperGridSizes) {
   EXPECT_EQ(g[0].ClassOf(14.0, 50.0), -1);
 }
 
+// The whole-surface grids (train --area whole): the paper's four grids over the patch's extent, cells of
+// about the paper's size; every point of the patch, edges included, has a cell in every grid, and soft
+// answers at an edge point are fused to a point near it (nothing pulls them into the indented area).
+TEST(GridsTest, WholeSurfaceGridsSpanThePatchEdgeToEdge) {
+  const patch::PatchSpec& spec = Spec();
+  const auto g = WholeSurfaceGrids(spec);
+  const auto paper = PaperGrids(spec.indented_area);
+  ASSERT_EQ(g[0].name, "SG");
+  ASSERT_EQ(g[3].name, "DSG");
+  EXPECT_EQ(g[0].ny, static_cast<int>(std::lround(spec.extent_y_mm / paper[0].cell_y_mm)));
+  EXPECT_EQ(g[0].nr, static_cast<int>(std::lround(spec.extent_r_deg / paper[0].cell_r_deg)));
+  for (const auto& gr : g) {
+    EXPECT_NEAR(gr.cell_y_mm / paper[0].cell_y_mm, 1.0, 0.25) << gr.name;
+    EXPECT_NEAR(gr.cell_r_deg / paper[0].cell_r_deg, 1.0, 0.25) << gr.name;
+  }
+  EXPECT_DOUBLE_EQ(g[0].y0_mm, 0.0);
+  EXPECT_DOUBLE_EQ(g[0].r0_deg, 0.0);
+  EXPECT_NEAR(g[0].y0_mm + g[0].ny * g[0].cell_y_mm, spec.extent_y_mm, 1e-9);
+  EXPECT_NEAR(g[0].r0_deg + g[0].nr * g[0].cell_r_deg, spec.extent_r_deg, 1e-9);
+  EXPECT_EQ(g[1].classes(), (g[0].ny + 1) * g[0].nr);
+  EXPECT_EQ(g[3].classes(), (g[0].ny + 1) * (g[0].nr + 1));
+  for (double y = 0.0; y < spec.extent_y_mm; y += 3.7) {
+    for (double r = 0.0; r < spec.extent_r_deg; r += 2.9) {
+      for (const auto& gr : g) EXPECT_GE(gr.ClassOf(y, r), 0) << gr.name << " " << y << " " << r;
+    }
+  }
+  EXPECT_EQ(paper[0].ClassOf(2.0, 2.0), -1) << "the paper's grids do not reach the corner";
+  const Nip nip(g);
+  ASSERT_LE(nip.fine_cells(), Nip::kMaxFineCells);
+  const patch::Geometry geo(spec.surface_radius_mm);
+  std::vector<float> p(nip.inputs());
+  for (const patch::SurfacePoint at : {patch::SurfacePoint{2.0, 2.0}, patch::SurfacePoint{148.0, 72.5},
+                                       patch::SurfacePoint{75.0, 143.0}, patch::SurfacePoint{3.0, 100.0}}) {
+    std::size_t off = 0;
+    for (const auto& gr : g) {
+      gr.SoftLabels(at.y_mm, at.r_deg, 3.0, spec.surface_radius_mm, std::span<float>(p.data() + off, static_cast<std::size_t>(gr.classes())));
+      off += static_cast<std::size_t>(gr.classes());
+    }
+    double y = 0, r = 0;
+    nip.Locate(p, y, r);
+    EXPECT_LT(geo.SurfaceDistanceMm({y, r}, at), 5.0) << at.y_mm << ", " << at.r_deg << " -> " << y << ", " << r;
+  }
+  EXPECT_THROW(PaperGrids(spec.indented_area, 0, 5), std::invalid_argument);
+}
+
 TEST(GridsTest, NipPutsAOneHotContactAtTheSharedFineCell) {
   const auto g = PaperGrids(Spec().indented_area);
   const Nip nip(g);

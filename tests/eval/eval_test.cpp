@@ -3,6 +3,7 @@
 
 #include <hdf5.h>
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 
@@ -180,6 +181,66 @@ TEST(ScoreStreamTest, MissesScoreAsFailuresAndFalseContactsCount) {
   const StreamMetrics c = ScoreStream(d, q, Spec(), {}, guess);
   EXPECT_NEAR(c.force_within_1sd, 0.5, 0.01);
   EXPECT_NEAR(c.force_within_2sd, 0.5, 0.01);
+}
+
+// Pressed frames are split by the press's distance from the patch's nearest edge (10 mm, on the surface):
+// an edge press placed 12 mm inward and read at half its force shows in the near-edge zone only.
+TEST(ScoreStreamTest, PressesNearAnEdgeAreScoredApart) {
+  dataset::Dataset d;
+  d.info.sample_rate_hz = 100.0;
+  auto add = [&](float f, float y, float r, int id) {
+    dataset::Frame fr;
+    fr.t_s = static_cast<double>(d.size()) * 0.01;
+    fr.serial = d.size();
+    fr.force_n = fr.true_force_n = f;
+    fr.y_mm = y;
+    fr.r_deg = r;
+    fr.indentation = id;
+    d.Append(fr);
+  };
+  for (int k = 0; k < 50; ++k) add(0.0f, NAN, NAN, -1);
+  // 0: 4 mm from the elbow edge (Y = 0); 1: the centre; 2: R 10 deg = 6.5 mm of arc from the R = 0 edge;
+  // 3: R 128 deg, 11.1 mm of arc from the R = 145 edge (interior by 1 mm).
+  const std::array<patch::SurfacePoint, 4> at = {{{4.0, 72.5}, {75.0, 72.5}, {75.0, 10.0}, {75.0, 128.0}}};
+  for (int i = 0; i < 4; ++i) {
+    for (int k = 0; k < 100; ++k) add(0.02f * static_cast<float>(k), static_cast<float>(at[i].y_mm), static_cast<float>(at[i].r_deg), i);
+  }
+  StreamPredictions p = PerfectStream(d);
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const int id = d.indentation[k];
+    if (id == 0 || id == 2) {
+      p.force_n[k] *= 0.5f;
+      if (p.located[k]) p.y_mm[k] += 12.0f;
+    }
+  }
+  const StreamMetrics m = ScoreStream(d, p, Spec(), {}, {75.0, 72.5});
+  EXPECT_EQ(m.near_edge.frames, 2u * 97u);
+  EXPECT_EQ(m.interior.frames, 2u * 97u);
+  EXPECT_NEAR(m.near_edge.location_mm.median, 12.0, 1e-4);
+  EXPECT_NEAR(m.near_edge.location_located_mm.median, 12.0, 1e-4);
+  EXPECT_NEAR(m.interior.location_mm.median, 0.0, 1e-4);
+  EXPECT_NEAR(m.near_edge.force_ratio_above_1n, 0.5, 1e-6);
+  EXPECT_NEAR(m.interior.force_ratio_above_1n, 1.0, 1e-6);
+  EXPECT_EQ(m.near_edge.frames_above_1n, 2u * 49u);  // 1.02 .. 1.98 N
+  EXPECT_NEAR(m.near_edge.location_above_1n_mm.median, 12.0, 1e-4);
+  EXPECT_NEAR(m.interior.location_above_1n_mm.median, 0.0, 1e-4);
+  EXPECT_GT(m.near_edge.force_mn.median, 100.0);
+  EXPECT_NEAR(m.interior.force_mn.median, 0.0, 1e-3);
+  EXPECT_EQ(m.near_edge.missed, 0u);
+  // Over range (invalid, in contact) counts in its zone and scores as a miss at 0 N.
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    if (d.indentation[k] == 1 && d.true_force_n[k] > 1.5f) {
+      p.valid[k] = 0;
+      p.in_contact[k] = 1;
+    }
+  }
+  const StreamMetrics o = ScoreStream(d, p, Spec(), {}, {75.0, 72.5});
+  EXPECT_EQ(o.interior.over_range, 24u);  // 1.52 .. 1.98 N
+  EXPECT_EQ(o.interior.missed, 24u);
+  EXPECT_EQ(o.near_edge.over_range, 0u);
+  const std::string table = EdgeZoneTable({{"constructed", &m}});
+  EXPECT_NE(table.find("within 10 mm of an edge"), std::string::npos);
+  EXPECT_NE(table.find("| constructed | interior | 194 |"), std::string::npos) << table;
 }
 
 TEST(EvaluateTest, PredictionsFileIsAligned) {

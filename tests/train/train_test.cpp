@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <limits>
 
+#include "ruffini/decode/grids.h"
 #include "ruffini/decode/model_io.h"
 #include "ruffini/decode/network_decoder.h"
 #include "ruffini/error.h"
@@ -297,6 +298,76 @@ TEST(TrainTest, ParallelFitsGiveTheSerialModel) {
   }
 }
 
+// --area whole (issue 16): trained on presses over the whole patch (the coverage protocol), the model records
+// the whole-surface grids, the runtime decodes with them (libtorch's golden outputs, locations outside the
+// indented area included) and the default stays the paper's grids.
+TEST(TrainTest, WholeAreaModelRecordsTheWholeSurfaceGrids) {
+  const twin::Scene& scene = F().scene;
+  const twin::SkinTwin t(scene.Patch().spec, scene.effects, {scene.probe.radius_mm});
+  dataset::Dataset d;
+  d.info = twin::TwinDatasetInfo(t, scene, "coverage", 4, 100.0);
+  twin::CoverageProtocol cp;
+  cp.indentations = 40;
+  twin::RunCoverage(t, scene, cp, 4, [&](std::span<const dataset::Frame> f) {
+    for (const auto& x : f) d.Append(x);
+  });
+  const eval::Prepared prepared = eval::PrepareFrames(d);
+  TrainOptions o;
+  o.window = 4;
+  o.mlp_widths = {16, 16, 16};
+  o.epochs_force = o.epochs_location = 1;
+  o.frames_per_epoch = 2048;
+  o.label_sigma_mm = 3.0;
+  o.folds = 0;
+  o.threads = 1;
+  o.golden_vectors = 8;
+  o.area = "whole";
+  const patch::PatchSpec& spec = scene.Patch().spec;
+  const auto m = Train(prepared, spec, o, "in-memory");
+  EXPECT_NO_THROW(decode::ValidateModel(m, "whole"));
+  const auto want = decode::WholeSurfaceGrids(spec);
+  ASSERT_EQ(m.location_size(), 4);
+  for (int k = 0; k < 4; ++k) {
+    const auto& g = m.location(k).grid();
+    const auto& w = want[static_cast<std::size_t>(k)];
+    EXPECT_EQ(g.name(), w.name);
+    EXPECT_DOUBLE_EQ(g.y0_mm(), w.y0_mm);
+    EXPECT_DOUBLE_EQ(g.r0_deg(), w.r0_deg);
+    EXPECT_DOUBLE_EQ(g.cell_y_mm(), w.cell_y_mm);
+    EXPECT_DOUBLE_EQ(g.cell_r_deg(), w.cell_r_deg);
+    EXPECT_EQ(static_cast<int>(g.ny()), w.ny);
+    EXPECT_EQ(static_cast<int>(g.nr()), w.nr);
+  }
+  decode::NetworkDecoder<float> df(m);
+  decode::NetworkDecoder<float>::Data af(df);
+  ASSERT_EQ(df.nip().inputs(), static_cast<std::size_t>(want[0].classes() + want[1].classes() + want[2].classes() + want[3].classes()));
+  ASSERT_GE(m.golden_size(), 1);
+  for (const auto& g : m.golden()) {
+    std::vector<float> p;
+    df.Probabilities(testing::LastFrame(g, m), af, p);
+    ASSERT_EQ(static_cast<int>(p.size()), g.probabilities_size());
+    for (std::size_t k = 0; k < p.size(); ++k) EXPECT_NEAR(p[k], g.probabilities(static_cast<int>(k)), 1e-5);
+    double y = 0, r = 0;
+    df.nip().Locate(p, y, r);
+    EXPECT_NEAR(y, g.y_mm(), 1e-3);
+    EXPECT_NEAR(r, g.r_deg(), 1e-3);
+  }
+  // The decoder's fused grid reaches beyond the indented area to the patch's edges.
+  const patch::Region& a = spec.indented_area;
+  std::vector<float> corner(df.nip().inputs(), 0.0f);
+  std::size_t off = 0;
+  for (const auto& w : want) {
+    corner[off + static_cast<std::size_t>(w.ClassOf(1.0, 1.0))] = 1.0f;
+    off += static_cast<std::size_t>(w.classes());
+  }
+  double y = 0, r = 0;
+  df.nip().Locate(corner, y, r);
+  EXPECT_LT(y, a.y_min_mm - 5.0);
+  EXPECT_LT(r, a.r_min_deg - 10.0);
+  // The default is the paper's grids.
+  EXPECT_EQ(F().models[0].location(0).grid().ny() * F().models[0].location(0).grid().nr(), 30u);
+}
+
 TEST(TrainTest, RejectsBadOptions) {
   TrainOptions o;
   o.mlp_widths = {8, 8};
@@ -315,6 +386,9 @@ TEST(TrainTest, RejectsBadOptions) {
   EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
   o.label_sigma_mm = 0.0;
   o.lr_schedule = "step";
+  EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
+  o.lr_schedule = "constant";
+  o.area = "elbow";
   EXPECT_THROW(Train(F().prepared, F().scene.Patch().spec, o, "x"), InputError);
 }
 

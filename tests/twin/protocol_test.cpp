@@ -4,11 +4,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <map>
+#include <numbers>
 #include <regex>
 #include <set>
 #include <string>
@@ -16,6 +18,7 @@
 
 #include "ruffini/dataset/dataset.h"
 #include "ruffini/error.h"
+#include "ruffini/patch/edge_distance.h"
 #include "ruffini/twin/protocols.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
@@ -152,6 +155,146 @@ TEST(Protocols, PaperProtocolStructure) {
   std::set<float> ys;
   for (const auto& f : frames) if (f.indentation >= 0) ys.insert(f.y_mm);
   EXPECT_EQ(ys.size(), static_cast<std::size_t>(p.indentations));
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 12b. Coverage protocol (issue 16): the paper's ramps over the whole patch, edge to edge.
+
+struct Press {
+  float y = 0, r = 0, peak = 0;
+  std::size_t frames = 0;
+};
+
+// Every press of a run: position, largest applied force; checks each press's structure on the way.
+std::vector<Press> PressesOf(const std::vector<dataset::Frame>& frames, int rest_frames) {
+  std::vector<Press> out;
+  float last = 0.0f;
+  for (std::size_t k = static_cast<std::size_t>(rest_frames); k < frames.size(); ++k) {
+    const auto& f = frames[k];
+    EXPECT_GE(f.indentation, 0) << "frame " << k;
+    if (f.indentation != static_cast<int>(out.size()) - 1) {
+      EXPECT_EQ(f.indentation, static_cast<int>(out.size())) << "presses contiguous, frame " << k;
+      EXPECT_EQ(f.true_force_n, 0.0f) << "a press starts at rest, frame " << k;
+      out.push_back({f.y_mm, f.r_deg, 0.0f, 0});
+    } else {
+      EXPECT_GE(f.true_force_n, last) << "increasing load only, frame " << k;
+      EXPECT_EQ(f.y_mm, out.back().y);
+      EXPECT_EQ(f.r_deg, out.back().r);
+    }
+    EXPECT_TRUE(std::isfinite(f.force_n));
+    last = f.true_force_n;
+    out.back().peak = std::max(out.back().peak, f.true_force_n);
+    ++out.back().frames;
+  }
+  return out;
+}
+
+TEST(Protocols, CoverageReachesEveryEdgeAndTheForcesSpanTheRange) {
+  const SkinTwin& twin = DefaultTwin();
+  const patch::PatchSpec& spec = twin.spec();
+  CoverageProtocol p;
+  p.indentations = 400;
+  ProtocolRun run;
+  const auto frames = Collect([&](const FrameSink& s) { return RunCoverage(twin, DefaultScene(), p, 5, s); }, &run);
+  ASSERT_EQ(run.frames, frames.size());
+  ASSERT_EQ(run.indentations, p.indentations);
+  for (int k = 0; k < p.rest_frames; ++k) EXPECT_EQ(frames[static_cast<std::size_t>(k)].indentation, -1);
+  const auto presses = PressesOf(frames, p.rest_frames);
+  ASSERT_EQ(presses.size(), static_cast<std::size_t>(p.indentations));
+
+  // Positions: all on the patch, edge to edge; some within 2 mm of each of the four edges; beyond the
+  // indented area (where the paper protocol never presses) on all four sides.
+  const double mm_per_deg = spec.surface_radius_mm * std::numbers::pi / 180.0;
+  std::array<int, 4> within_2mm{}, beyond_area{};
+  int in_band = 0;
+  for (const auto& q : presses) {
+    ASSERT_TRUE(spec.Extent().Contains({q.y, q.r}, 1e-4)) << q.y << ", " << q.r;
+    within_2mm[0] += q.y <= 2.0;
+    within_2mm[1] += spec.extent_y_mm - q.y <= 2.0;
+    within_2mm[2] += q.r * mm_per_deg <= 2.0;
+    within_2mm[3] += (spec.extent_r_deg - q.r) * mm_per_deg <= 2.0;
+    beyond_area[0] += q.y < spec.indented_area.y_min_mm;
+    beyond_area[1] += q.y > spec.indented_area.y_max_mm;
+    beyond_area[2] += q.r < spec.indented_area.r_min_deg;
+    beyond_area[3] += q.r > spec.indented_area.r_max_deg;
+    in_band += patch::EdgeDistanceMm(spec, {q.y, q.r}) < p.edge_band_mm;
+  }
+  for (int e = 0; e < 4; ++e) {
+    EXPECT_GE(within_2mm[static_cast<std::size_t>(e)], 1) << "edge " << e;
+    EXPECT_GE(beyond_area[static_cast<std::size_t>(e)], 10) << "side " << e;
+  }
+  // The 12 mm band is 37 % of the paper patch: uniform draws alone put 37 % there, the protocol's 30 % of
+  // band draws 0.3 + 0.7 x 0.37 = 56 %.
+  const double band_share = static_cast<double>(in_band) / static_cast<double>(presses.size());
+  EXPECT_GT(band_share, 0.47);
+  EXPECT_LT(band_share, 0.66);
+  CoverageProtocol uniform = p;
+  uniform.edge_fraction = 0.0;
+  const auto uframes = Collect([&](const FrameSink& s) { return RunCoverage(twin, DefaultScene(), uniform, 5, s); }, nullptr);
+  int u_band = 0;
+  for (const auto& q : PressesOf(uframes, p.rest_frames)) u_band += patch::EdgeDistanceMm(spec, {q.y, q.r}) < p.edge_band_mm;
+  EXPECT_GT(band_share, static_cast<double>(u_band) / p.indentations + 0.1) << "the edge draws add presses near the edges";
+
+  // Forces: log-uniform peaks from 0.05 N up to the contact law's linear limit (beyond it every frame is
+  // flagged saturated, over range for the decoder): none beyond, light and hard presses both present, the
+  // median near the geometric mean of the range.
+  const double f_lin = twin.contact_law(DefaultScene().probe)->linear_limit_force_n();
+  std::vector<float> peaks;
+  for (const auto& q : presses) peaks.push_back(q.peak);
+  std::sort(peaks.begin(), peaks.end());
+  EXPECT_LE(peaks.back(), f_lin + 1e-6);
+  EXPECT_GT(peaks.back(), 0.9 * f_lin);
+  EXPECT_LT(peaks.front(), 0.1f);
+  const double median = peaks[peaks.size() / 2], geo_mean = std::sqrt(p.force_min_n * f_lin);
+  EXPECT_GT(median, 0.7 * geo_mean);
+  EXPECT_LT(median, 1.4 * geo_mean);
+  std::size_t saturated = 0;
+  for (const auto& f : frames) saturated += (f.flags & kFlagSaturated) ? 1 : 0;
+  EXPECT_EQ(saturated, 0u) << "no press goes beyond the linear limit";
+}
+
+TEST(Protocols, CoverageIsSeedReproducible) {
+  const SkinTwin& twin = DefaultTwin();
+  CoverageProtocol p;
+  p.indentations = 30;
+  auto run = [&](std::uint64_t seed) {
+    return Collect([&](const FrameSink& s) { return RunCoverage(twin, DefaultScene(), p, seed, s); }, nullptr);
+  };
+  const auto a = run(11), b = run(11), c = run(12);
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    ASSERT_EQ(a[k].wavelength_nm, b[k].wavelength_nm) << "frame " << k;
+    ASSERT_EQ(a[k].force_n, b[k].force_n) << "frame " << k;
+    ASSERT_EQ(a[k].true_force_n, b[k].true_force_n) << "frame " << k;
+    ASSERT_TRUE(a[k].y_mm == b[k].y_mm || (std::isnan(a[k].y_mm) && std::isnan(b[k].y_mm))) << "frame " << k;
+  }
+  const auto pa = PressesOf(a, p.rest_frames), pc = PressesOf(c, p.rest_frames);
+  int same = 0;
+  for (std::size_t k = 0; k < std::min(pa.size(), pc.size()); ++k) same += pa[k].y == pc[k].y && pa[k].r == pc[k].r;
+  EXPECT_EQ(same, 0) << "another seed presses elsewhere";
+}
+
+TEST(Protocols, CoverageRejectsBadParameters) {
+  const SkinTwin& twin = DefaultTwin();
+  auto run = [&](const CoverageProtocol& p) {
+    (void)Collect([&](const FrameSink& s) { return RunCoverage(twin, DefaultScene(), p, 1, s); }, nullptr);
+  };
+  CoverageProtocol p;
+  p.indentations = 0;
+  EXPECT_THROW(run(p), InputError);
+  p = {};
+  p.edge_fraction = 1.5;
+  EXPECT_THROW(run(p), InputError);
+  p = {};
+  p.force_min_n = 2.0;
+  p.force_max_n = 1.0;
+  EXPECT_THROW(run(p), InputError);
+  p = {};
+  p.force_min_n = 10.0;  // above the linear limit that force_max_n = 0 stands for
+  EXPECT_THROW(run(p), InputError);
+  p = {};
+  p.edge_band_mm = 0.0;
+  EXPECT_THROW(run(p), InputError);
 }
 
 // ---------------------------------------------------------------------------------------------------

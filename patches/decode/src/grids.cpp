@@ -43,12 +43,27 @@ void GridSpec::SoftLabels(double y_mm, double r_deg, double sigma_mm, double rad
   for (int k = 0; k < classes(); ++k) out[static_cast<std::size_t>(k)] = static_cast<float>(cell(k) / total);
 }
 
-std::array<GridSpec, 4> PaperGrids(const patch::Region& a) {
-  const double cy = (a.y_max_mm - a.y_min_mm) / 6.0, cr = (a.r_max_deg - a.r_min_deg) / 5.0;
-  return {GridSpec{"SG", a.y_min_mm, a.r_min_deg, cy, cr, 6, 5},
-          GridSpec{"VSG", a.y_min_mm - cy / 2, a.r_min_deg, cy, cr, 7, 5},
-          GridSpec{"HSG", a.y_min_mm, a.r_min_deg - cr / 2, cy, cr, 6, 6},
-          GridSpec{"DSG", a.y_min_mm - cy / 2, a.r_min_deg - cr / 2, cy, cr, 7, 6}};
+std::array<GridSpec, 4> PaperGrids(const patch::Region& a) { return PaperGrids(a, 6, 5); }
+
+std::array<GridSpec, 4> PaperGrids(const patch::Region& a, int ny, int nr) {
+  if (ny < 1 || nr < 1 || !(a.y_max_mm > a.y_min_mm) || !(a.r_max_deg > a.r_min_deg)) {
+    throw std::invalid_argument("PaperGrids: need a non-empty area and at least one cell each way");
+  }
+  const double cy = (a.y_max_mm - a.y_min_mm) / ny, cr = (a.r_max_deg - a.r_min_deg) / nr;
+  return {GridSpec{"SG", a.y_min_mm, a.r_min_deg, cy, cr, ny, nr},
+          GridSpec{"VSG", a.y_min_mm - cy / 2, a.r_min_deg, cy, cr, ny + 1, nr},
+          GridSpec{"HSG", a.y_min_mm, a.r_min_deg - cr / 2, cy, cr, ny, nr + 1},
+          GridSpec{"DSG", a.y_min_mm - cy / 2, a.r_min_deg - cr / 2, cy, cr, ny + 1, nr + 1}};
+}
+
+std::array<GridSpec, 4> WholeSurfaceGrids(const patch::PatchSpec& spec) {
+  const patch::Region& a = spec.indented_area;
+  const double paper_cy = (a.y_max_mm - a.y_min_mm) / 6.0, paper_cr = (a.r_max_deg - a.r_min_deg) / 5.0;
+  const patch::Region whole = spec.Extent();
+  auto cells = [](double length, double paper_cell) {
+    return paper_cell > 0 ? std::max(1, static_cast<int>(std::lround(length / paper_cell))) : 1;
+  };
+  return PaperGrids(whole, cells(whole.y_max_mm - whole.y_min_mm, paper_cy), cells(whole.r_max_deg - whole.r_min_deg, paper_cr));
 }
 
 Nip::Nip(std::span<const GridSpec> grids) : grids_(grids.size()) {

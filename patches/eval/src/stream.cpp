@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "ruffini/error.h"
+#include "ruffini/patch/edge_distance.h"
 #include "ruffini/patch/geometry.h"
 
 namespace ruffini::eval {
@@ -115,6 +116,9 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
   std::vector<double> f_all, f_above, f_cell, l_above, l_located;
   std::size_t above100 = 0, missed100 = 0;
   std::size_t f1 = 0, f2 = 0, p1 = 0, p2 = 0;
+  struct ZoneData {
+    std::vector<double> force, location, located, ratio, location_1n;
+  } zone_edge, zone_in;
   for (std::size_t k = 0; k < d.size(); ++k) {
     if (!mask.empty() && !mask[k]) continue;
     ++m.frames;
@@ -172,6 +176,19 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
       }
       l_above.push_back(le);
       bin_l[b].push_back(le);
+      const bool near = patch::EdgeDistanceMm(spec, truth) <= StreamMetrics::kEdgeBandMm;
+      EdgeZone& zone = near ? m.near_edge : m.interior;
+      ZoneData& zd = near ? zone_edge : zone_in;
+      ++zone.frames;
+      zone.missed += located ? 0 : 1;
+      zone.over_range += !valid && p.in_contact[k] ? 1 : 0;
+      zd.force.push_back(fe);
+      zd.location.push_back(le);
+      if (located) zd.located.push_back(le);
+      if (ref > 1.0) {
+        zd.ratio.push_back(pred / ref);
+        zd.location_1n.push_back(le);
+      }
       if (ref > 0.1) {
         ++above100;
         missed100 += !located;
@@ -191,6 +208,14 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
     }
     m.longest_frozen_s = static_cast<double>(best_f) * dt;
     m.longest_press_s = static_cast<double>(best_p) * dt;
+  }
+  for (auto [zone, zd] : {std::pair{&m.near_edge, &zone_edge}, std::pair{&m.interior, &zone_in}}) {
+    zone->force_mn = stats::Summarize(zd->force);
+    zone->location_mm = stats::Summarize(zd->location);
+    zone->location_located_mm = stats::Summarize(zd->located);
+    zone->frames_above_1n = zd->ratio.size();
+    zone->location_above_1n_mm = stats::Summarize(zd->location_1n);
+    zone->force_ratio_above_1n = zd->ratio.empty() ? kNaN : stats::Median(zd->ratio);
   }
   m.force_all_mn = stats::Summarize(f_all);
   m.force_above_mn = stats::Summarize(f_above);
@@ -237,6 +262,26 @@ std::string StreamMetricsRow(const std::string& name, const StreamMetrics& m) {
   return o.str();
 }
 
+std::string EdgeZoneTable(const std::vector<std::pair<std::string, const StreamMetrics*>>& rows) {
+  std::ostringstream o;
+  const auto s = [](const stats::Summary& v, const char* fmt) { return F(fmt, v.median) + " (" + F(fmt, v.iqr()) + ")"; };
+  o << "| data | zone | pressed frames (> 50 mN) | force error, median (IQR) mN | reported / true force above 1 N, median | "
+       "location, misses as failures: median (IQR) mm | located only | above 1 N, misses as failures | not located | over range |\n"
+       "|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& [name, m] : rows) {
+    for (const auto& [zone_name, z] : {std::pair{F("within %.0f mm of an edge", StreamMetrics::kEdgeBandMm), &m->near_edge},
+                                      std::pair{std::string("interior"), &m->interior}}) {
+      o << "| " << name << " | " << zone_name << " | " << z->frames << " | " << s(z->force_mn, "%.1f") << " | "
+        << (std::isfinite(z->force_ratio_above_1n) ? F("%.2f", z->force_ratio_above_1n) : std::string("-")) << " | "
+        << s(z->location_mm, "%.2f") << " | " << s(z->location_located_mm, "%.2f") << " | "
+        << (z->frames_above_1n ? s(z->location_above_1n_mm, "%.2f") : std::string("-")) << " | "
+        << F("%.1f %%", 100.0 * static_cast<double>(z->missed) / std::max<double>(1.0, static_cast<double>(z->frames))) << " | "
+        << F("%.1f %%", 100.0 * static_cast<double>(z->over_range) / std::max<double>(1.0, static_cast<double>(z->frames))) << " |\n";
+    }
+  }
+  return o.str();
+}
+
 std::string ForceBinTable(const StreamMetrics& m) {
   std::ostringstream o;
   o << "| true force (N) | frames | reported in contact | not located | force error, median mN | location error (misses as failures), median mm |\n"
@@ -278,6 +323,9 @@ std::string StreamReportSection(const std::vector<StreamReportRow>& rows, const 
     << "| " << rows.front().label << " | " << F("%.3f %%", 100.0 * whole.false_contact_rate) << " (" << whole.false_contacts
     << " of " << whole.quiet_frames << ") | " << F("%.1f s", whole.longest_frozen_s) << " | " << F("%.1f s", whole.longest_press_s)
     << " | " << (reasons.empty() ? std::string("none") : reasons) << " |\n";
+  std::vector<std::pair<std::string, const StreamMetrics*>> zones;
+  for (const auto& r : rows) zones.emplace_back(r.label, &r.scored);
+  h << "\n### By distance from the patch's edge (pressed frames: reference force above 50 mN)\n\n" << EdgeZoneTable(zones);
   h << "\n### Per force bin (" << rows.front().label << ", scored frames)\n\n" << ForceBinTable(sm);
   h << "\n### Uncertainty\n\n";
   if (u != nullptr) {

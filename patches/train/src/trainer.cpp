@@ -115,7 +115,7 @@ std::vector<std::uint32_t> Subsample(const std::vector<std::uint32_t>& v, std::s
 class Trainer {
  public:
   Trainer(const eval::Prepared& p, const patch::PatchSpec& spec, const TrainOptions& o, const TrainProgress& progress)
-      : p_(p), spec_(spec), o_(o), progress_(progress), grids_(decode::PaperGrids(spec.indented_area)) {
+      : p_(p), spec_(spec), o_(o), progress_(progress), grids_(o.area == "whole" ? decode::WholeSurfaceGrids(spec) : decode::PaperGrids(spec.indented_area)) {
     start_of_.resize(p.size(), 0);
     for (const auto& r : p.ranges) {
       for (std::size_t f = r.first; f < r.second; ++f) start_of_[f] = static_cast<std::uint32_t>(r.first);
@@ -385,6 +385,9 @@ v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec,
   }
   if (o.location_input != "raw" && o.location_input != "unit") {
     throw InputError("train: location input must be raw or unit, not '" + o.location_input + "'");
+  }
+  if (o.area != "indented" && o.area != "whole") {
+    throw InputError("train: area must be indented or whole, not '" + o.area + "'");
   }
   if (!(o.label_sigma_mm >= 0 && o.label_sigma_mm <= 100)) throw InputError("train: label sigma must be 0..100 mm");
   if (!(o.drift_augment_pm >= 0 && o.drift_augment_pm <= 100)) throw InputError("train: drift augmentation must be 0..100 pm");

@@ -5,6 +5,7 @@
 #include <random>
 
 #include "ruffini/error.h"
+#include "ruffini/patch/edge_distance.h"
 #include "ruffini/yaml_reader.h"
 #include "ruffini/twin/viscoelastic.h"
 
@@ -24,7 +25,8 @@ class Recorder {
   // No flush here: a sink that threw must not be called again while unwinding. Callers Flush() at the end.
   ~Recorder() = default;
 
-  void Emit(std::span<const Contact> contacts, float force_label, float true_force, float y, float r, int indentation) {
+  // Returns the frame's flags.
+  std::uint32_t Emit(std::span<const Contact> contacts, float force_label, float true_force, float y, float r, int indentation) {
     dataset::Frame f;
     Shifts s;
     std::uint32_t flags = 0;
@@ -41,6 +43,7 @@ class Recorder {
     f.indentation = indentation;
     block_.push_back(f);
     if (block_.size() == kBlock) Flush();
+    return flags;
   }
   void Flush() {
     if (block_.empty()) return;
@@ -158,6 +161,71 @@ ProtocolRun RunPaper(const SkinTwin& twin, const Scene& scene, const PaperProtoc
       if (force > p.max_force_n) break;  // only the increasing-load phase is kept
       rec.Emit(loads.Press(force), cell.Read(force), static_cast<float>(force),
                static_cast<float>(at.y_mm), static_cast<float>(at.r_deg), k);
+    }
+    if (progress && (k % 16 == 15 || k + 1 == p.indentations)) progress(static_cast<std::uint64_t>(k + 1), static_cast<std::uint64_t>(p.indentations));
+  }
+  rec.Flush();
+  return {rec.frames(), p.indentations};
+}
+
+void CoverageProtocol::Validate() const {
+  auto fail = [](const std::string& what) { throw InputError("coverage protocol: " + what); };
+  if (indentations < 1) fail("indentations (" + std::to_string(indentations) + ") must be at least 1");
+  if (!(rate_hz > 0.0) || !std::isfinite(rate_hz)) fail("rate_hz (" + FormatNumber(rate_hz) + ") must be positive");
+  if (!(speed_mm_s > 0.0) || !std::isfinite(speed_mm_s)) fail("speed_mm_s (" + FormatNumber(speed_mm_s) + ") must be positive");
+  if (!(force_min_n > 0.0) || !std::isfinite(force_min_n)) fail("force_min_n (" + FormatNumber(force_min_n) + ") must be positive");
+  if (!(force_max_n == 0.0 || (force_max_n >= force_min_n && std::isfinite(force_max_n)))) {
+    fail("force_max_n (" + FormatNumber(force_max_n) + ") must be 0 (the linear limit) or at least force_min_n (" +
+         FormatNumber(force_min_n) + ")");
+  }
+  if (!(edge_fraction >= 0.0 && edge_fraction <= 1.0)) fail("edge_fraction (" + FormatNumber(edge_fraction) + ") must be 0..1");
+  if (!(edge_band_mm > 0.0) || !std::isfinite(edge_band_mm)) fail("edge_band_mm (" + FormatNumber(edge_band_mm) + ") must be positive");
+  if (!(approach_mm >= 0.0) || !std::isfinite(approach_mm)) fail("approach_mm (" + FormatNumber(approach_mm) + ") must be >= 0");
+  if (!(approach_jitter >= 0.0 && approach_jitter < 1.0)) fail("approach_jitter (" + FormatNumber(approach_jitter) + ") must be 0..1");
+  if (rest_frames < 0) fail("rest_frames (" + std::to_string(rest_frames) + ") must be >= 0");
+}
+
+ProtocolRun RunCoverage(const SkinTwin& twin, const Scene& scene, const CoverageProtocol& p, std::uint64_t seed,
+                        const FrameSink& sink, const ProgressFn& progress) {
+  p.Validate();
+  Recorder rec(twin, DeriveSeed(seed, 1), p.rate_hz, sink);
+  LoadCellModel cell(scene.load_cell, DeriveSeed(seed, 2));
+  std::mt19937_64 rng(DeriveSeed(seed, 6));
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const ContactLaw* law = RequireSphere(twin, scene, "coverage");
+  const patch::PatchSpec& spec = twin.spec();
+  const patch::Region whole = spec.Extent();
+  const double f_lo = p.force_min_n;
+  const double f_hi = p.force_max_n > 0.0 ? p.force_max_n : law->linear_limit_force_n();
+  if (!(f_hi >= f_lo)) {
+    throw InputError("coverage protocol: force_min_n (" + FormatNumber(f_lo) + " N) exceeds the contact law's linear limit (" +
+                     FormatNumber(f_hi) + " N)");
+  }
+  // Points within the band: drawn uniformly over the patch until one lies in it (the band is a third of the
+  // paper patch: a few draws). A band wider than half the patch is all of it.
+  auto in_band = [&] {
+    for (;;) {
+      const patch::SurfacePoint at = UniformIn(whole, rng);
+      if (patch::EdgeDistanceMm(spec, at) < p.edge_band_mm) return at;
+    }
+  };
+
+  Loads loads(twin, p.rate_hz, scene.probe);
+  for (int i = 0; i < p.rest_frames; ++i) rec.Emit(loads.Release(), cell.Read(0.0), 0.0f, kNaN, kNaN, -1);
+  for (int k = 0; k < p.indentations; ++k) {
+    // Every draw of a press, in a fixed order, before any frame: the same seed gives the same presses.
+    const bool edge = u(rng) < p.edge_fraction;
+    const patch::SurfacePoint at = edge ? in_band() : UniformIn(whole, rng);
+    const double peak = std::exp(std::log(f_lo) + (std::log(f_hi) - std::log(f_lo)) * u(rng));
+    const double gap = p.approach_mm * (1.0 + p.approach_jitter * (2.0 * u(rng) - 1.0));
+    loads.MoveTo(at);
+    for (int n = 0;; ++n) {
+      const double travel = p.speed_mm_s * n / p.rate_hz - gap;
+      const double force = law->ForceN(std::max(0.0, travel));
+      if (force > peak) break;  // only the increasing-load phase is kept
+      const std::uint32_t flags = rec.Emit(loads.Press(force), cell.Read(force), static_cast<float>(force),
+                                           static_cast<float>(at.y_mm), static_cast<float>(at.r_deg), k);
+      if (flags & kFlagSaturated) break;  // over range from here on: one such frame is kept
     }
     if (progress && (k % 16 == 15 || k + 1 == p.indentations)) progress(static_cast<std::uint64_t>(k + 1), static_cast<std::uint64_t>(p.indentations));
   }

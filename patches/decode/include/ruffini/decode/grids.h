@@ -34,6 +34,13 @@ struct GridSpec {
 
 // The four grids over a patch's indented area, in the paper's order SG, VSG, HSG, DSG.
 std::array<GridSpec, 4> PaperGrids(const patch::Region& indented_area);
+// The paper's four grids over an area cut into ny x nr cells (PaperGrids is 6 x 5 over the indented area).
+std::array<GridSpec, 4> PaperGrids(const patch::Region& area, int ny, int nr);
+// The four grids over the patch's whole extent (Y 0..extent, R 0..extent; issue 16), with cells as close as
+// possible to the paper's (the indented area's sixth in Y, fifth in R): for the paper's patch 8 x 8 cells of
+// 18.75 mm x 18.125 deg, so SG 64, VSG 72, HSG 72, DSG 81 classes. The shifted grids stick out half a cell
+// beyond the patch, as the paper's stick out beyond its area.
+std::array<GridSpec, 4> WholeSurfaceGrids(const patch::PatchSpec& spec);
 
 // Precomputed NIP: fine cells, their centres and their parent class in each grid (-1 = none).
 class Nip {

@@ -7,7 +7,9 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "ruffini/dataset/dataset.h"
@@ -47,6 +49,20 @@ struct ForceBinRow {
   double location_error_mm = 0;  // median, misses as failures (NaN below 50 mN)
 };
 
+// Pressed frames (reference force above 50 mN, position known) of one zone of the patch (StreamMetrics).
+struct EdgeZone {
+  std::size_t frames = 0, missed = 0;  // missed: not located (gate closed or invalid)
+  std::size_t over_range = 0;          // reported over range (invalid, in contact: force "at least")
+  stats::Summary force_mn{};           // |error|; an invalid frame reports 0, as everywhere in this scoring
+  stats::Summary location_mm{};        // misses as failures (scored at the random guess's error)
+  stats::Summary location_located_mm{};
+  // Median of reported / true force over the zone's frames above 1 N (below 1: read too light). NaN: none.
+  double force_ratio_above_1n = std::numeric_limits<double>::quiet_NaN();
+  std::size_t frames_above_1n = 0;
+  // Location over the zone's frames above 1 N (a press the region thresholds care about): misses as failures.
+  stats::Summary location_above_1n_mm{};
+};
+
 struct StreamMetrics {
   std::size_t frames = 0;      // frames scored (the mask)
   std::size_t invalid = 0;
@@ -69,6 +85,10 @@ struct StreamMetrics {
   // Baseline: longest frozen stretch and longest press (true force > 20 mN, contiguous), s.
   double longest_frozen_s = 0, longest_press_s = 0;
   patch::SurfacePoint guess;   // the random guess's position
+  // Pressed frames by the true position's distance from the patch's nearest edge (patch::EdgeDistanceMm):
+  // within kEdgeBandMm (issue 16's "within 10 mm of an edge") or farther in.
+  static constexpr double kEdgeBandMm = 10.0;
+  EdgeZone near_edge, interior;
 };
 
 // Scores the frames where mask[k] != 0 (empty mask: every frame). guess: the position a random guess names
@@ -82,6 +102,8 @@ std::vector<std::uint8_t> MaskOfIndentations(const dataset::Dataset& data, const
 // One Markdown table row per metric set, for reports: "| name | force all | force > 50 | location | ..."
 std::string StreamMetricsHeader();
 std::string StreamMetricsRow(const std::string& name, const StreamMetrics& m);
+// One Markdown table of the near-edge and interior zones, one row pair per metric set.
+std::string EdgeZoneTable(const std::vector<std::pair<std::string, const StreamMetrics*>>& rows);
 // The per-force-bin table (miss rate, false contacts, errors).
 std::string ForceBinTable(const StreamMetrics& m);
 

@@ -39,6 +39,10 @@ struct TrainOptions {
   int folds = 5;                           // 0: no cross-validation
   double test_fraction = 0.15;
   double gate_n = 0.05;
+  // What the location grids span: "indented" (the paper's: PaperGrids over the spec's indented area) or
+  // "whole" (WholeSurfaceGrids: the patch's full extent, for data pressed edge to edge). The model file
+  // records the grids, so the decoder locates with whichever was trained.
+  std::string area = "indented";
   std::uint64_t seed = 1;
   int threads = 2;                         // fits trained at once (one core each)
   int golden_vectors = 4;
@@ -48,7 +52,7 @@ struct TrainOptions {
 // over all fits; epochs of all fits; that epoch's mean loss). Fits run in parallel; calls are serialised.
 using TrainProgress = std::function<void(const std::string& phase, int epoch, int epochs, double loss)>;
 
-// Trains on `data` for `spec` (grids from its indented area). Fills every field of the model, including the
+// Trains on `data` for `spec` (grids from its indented area, or its whole extent: TrainOptions::area). Fills every field of the model, including the
 // cross-validation table, the held-out test indentations and golden vectors computed by libtorch.
 v1::DecoderModel Train(const eval::Prepared& data, const patch::PatchSpec& spec, const TrainOptions& options,
                        const std::string& dataset_path, const TrainProgress& progress = {});

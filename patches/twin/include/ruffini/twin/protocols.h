@@ -9,6 +9,15 @@
 // vonfrey: the paper's sensitivity test: 8 filaments (0.4 g to 60 g) x subjects x sites at random positions,
 //   each a short ramp, a hold at the filament's buckling force and a release.
 // receptive-field: a grid scan with the probe, each site ramped to 2.5 N, for hot-spot maps.
+// coverage: the paper protocol over the WHOLE patch (issue 16): the same force-controlled ramps (probe speed,
+//   approach, rest first, labels, only the increasing-load phase), at uniform random positions over the
+//   patch's extent, edge to edge (Y 0..extent, R 0..extent), a fixed fraction of them (edge_fraction) drawn
+//   uniformly within edge_band_mm of an edge (distance on the surface, R as arc length) since that is where
+//   the paper-trained nets have seen nothing. Each ramp stops at a peak force drawn log-uniformly in
+//   force_min_n..force_max_n; force_max_n = 0 means the contact law's linear limit (4.2 N for the paper's
+//   11 mm sphere on 8 mm of cover), the force beyond which the twin flags every frame saturated, which the
+//   decode pipeline reports as over range and never feeds to the nets. A ramp also stops after the first frame
+//   the twin flags saturated (a peak out of its band), which is kept.
 // field: what a skin meets in use rather than in the lab: press-hold-release cycles of the scene's probe at
 //   uniform random positions over the indented area, each after a rest of U(1, 30) s untouched: a
 //   force-controlled ramp up over U(0.5, 3) s to a force drawn log-uniformly in 0.1-2.5 N, a hold of
@@ -38,6 +47,22 @@ struct PaperProtocol {
   double approach_mm = 1.04;      // mean gap between probe and skin when a recording starts
   double approach_jitter = 0.15;  // relative, uniform
   int rest_frames = 200;
+};
+
+struct CoverageProtocol {
+  int indentations = 2700;
+  double rate_hz = 100.0;
+  double force_min_n = 0.05;      // peak forces: log-uniform in force_min_n..force_max_n
+  double force_max_n = 0.0;       // 0: the contact law's linear limit
+  double edge_fraction = 0.3;     // share of presses drawn within edge_band_mm of an edge
+  double edge_band_mm = 12.0;
+  double speed_mm_s = 0.28;
+  double approach_mm = 1.04;
+  double approach_jitter = 0.15;
+  int rest_frames = 200;
+
+  // Throws InputError naming the first field out of range.
+  void Validate() const;
 };
 
 struct VonFreyProtocol {
@@ -85,6 +110,8 @@ struct ProtocolRun {
 
 ProtocolRun RunPaper(const SkinTwin& twin, const Scene& scene, const PaperProtocol& p, std::uint64_t seed,
                      const FrameSink& sink, const ProgressFn& progress = {});
+ProtocolRun RunCoverage(const SkinTwin& twin, const Scene& scene, const CoverageProtocol& p, std::uint64_t seed,
+                        const FrameSink& sink, const ProgressFn& progress = {});
 ProtocolRun RunVonFrey(const SkinTwin& twin, const VonFreyProtocol& p, std::uint64_t seed, const FrameSink& sink,
                        const ProgressFn& progress = {});
 ProtocolRun RunReceptiveField(const SkinTwin& twin, const Scene& scene, const ReceptiveFieldProtocol& p,
