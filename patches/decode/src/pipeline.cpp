@@ -277,6 +277,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
     out.y_mm = out.r_deg = kNaN;
     ++d.counters_.invalid[static_cast<std::size_t>(r)];
     ++d.invalid_run_;
+    d.pair_age_ = 1 << 30;  // the two-touch fit's places end with the located frames (a gap: fit afresh)
     // A gap longer than the window: the networks start afresh from the next valid frame.
     if (d.invalid_run_ > decoder_.window()) d.primed_ = false;
     return out;
