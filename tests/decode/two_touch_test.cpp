@@ -165,6 +165,26 @@ TEST(TouchCheck, AMalformedMapIsRefusedWithItsReason) {
   m = SyntheticMap(0.05);
   m.set_dy_mm(0);
   EXPECT_THROW({ decode::TouchCheck c(m); }, InputError);
+  m = SyntheticMap(0.05);
+  m.set_dr_deg(0.01);  // a step too fine to be a place
+  EXPECT_THROW({ decode::TouchCheck c(m); }, InputError);
+  // Too many nodes for a flagged frame's fit to stay inside a 1 kHz period (the review: 300 x 300 took 1.2 ms).
+  m = SyntheticMap(0.05);
+  m.set_ny(200);
+  m.set_nr(200);
+  m.mutable_g_pm_per_n()->Resize(200 * 200 * 16, 1.0f);
+  EXPECT_THROW({ decode::TouchCheck c(m); }, InputError);
+}
+
+// A map that does not lie on the patch would flag every frame and place it there: the pipeline refuses it.
+TEST(TwoTouches, AResponseMapOffThePatchIsRefused) {
+  const Shipped& s = Get();
+  v1::DecoderModel moved = s.model;
+  moved.mutable_response()->set_y0_mm(1000.0);
+  decode::PipelineConfig config;
+  config.baseline = decode::BaselineFor(moved, 1000.0);
+  EXPECT_THROW((decode::Pipeline<float>(moved, s.scene.patches[s.patch].spec, config)), InputError);
+  EXPECT_NO_THROW((decode::Pipeline<float>(s.model, s.scene.patches[s.patch].spec, config)));
 }
 
 }  // namespace

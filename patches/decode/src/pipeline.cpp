@@ -82,7 +82,18 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
         config_.multi_margin_mm < 1e4)) {
     throw InputError("pipeline: multi_rel must be in (0, 1], multi_floor_pm, multi_link_mm and multi_margin_mm >= 0");
   }
-  if (m.has_response()) touches_.emplace(m.response());
+  if (m.has_response()) {
+    touches_.emplace(m.response());
+    // The map must lie on the patch (1 mm and 1 deg of slack): a map elsewhere would flag every frame and place
+    // it off the patch.
+    const ResponseModel& r = touches_->model();
+    const double y1 = r.y0_mm + (r.ny - 1) * r.dy_mm, r1 = r.r0_deg + (r.nr - 1) * r.dr_deg;
+    if (!(r.y0_mm >= -1.0 && y1 <= spec.extent_y_mm + 1.0 && r.r0_deg >= -1.0 && r1 <= spec.extent_r_deg + 1.0)) {
+      throw InputError("pipeline: the model's response map (Y " + std::to_string(r.y0_mm) + ".." + std::to_string(y1) +
+                       " mm, R " + std::to_string(r.r0_deg) + ".." + std::to_string(r1) + " deg) does not lie on the patch (Y 0.." +
+                       std::to_string(spec.extent_y_mm) + " mm, R 0.." + std::to_string(spec.extent_r_deg) + " deg)");
+    }
+  }
   if (!(config_.multi_refit_s >= 0 && config_.multi_refit_s <= 1)) throw InputError("pipeline: multi_refit_s must be 0..1 s");
   refit_frames_ = static_cast<int>(std::lround(config_.multi_refit_s * config_.baseline.sample_rate_hz));
   half_y_mm_ = 0.5 * spec.extent_y_mm;

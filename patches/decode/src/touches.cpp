@@ -194,9 +194,15 @@ v1::ResponseMap ToProto(const ResponseModel& m, double multiple_misfit, const st
 ResponseModel FromProto(const v1::ResponseMap& p) {
   ResponseModel m;
   const auto bad = [](const std::string& what) { return InputError("response map: " + what); };
-  if (!(p.ny() >= 2 && p.nr() >= 2 && p.ny() <= 10000 && p.nr() <= 10000)) throw bad("ny and nr must be 2..10000");
-  if (!(p.dy_mm() > 0 && p.dr_deg() > 0 && std::isfinite(p.dy_mm()) && std::isfinite(p.dr_deg()))) {
-    throw bad("dy_mm and dr_deg must be finite and > 0");
+  // Bounded so that a flagged frame's two-touch fit stays well inside a 1 kHz frame period (the shipped maps:
+  // 81 x 41 nodes of 1.5 mm, about 80 us; the cost grows with the node count).
+  constexpr std::uint32_t kMaxNodes = 8000;
+  if (!(p.ny() >= 2 && p.nr() >= 2 && static_cast<std::uint64_t>(p.ny()) * p.nr() <= kMaxNodes)) {
+    throw bad("ny and nr must be at least 2 and ny * nr at most " + std::to_string(kMaxNodes) + " (got " +
+              std::to_string(p.ny()) + " x " + std::to_string(p.nr()) + ")");
+  }
+  if (!(p.dy_mm() >= 0.1 && p.dr_deg() >= 0.1 && p.dy_mm() <= 100 && p.dr_deg() <= 100)) {
+    throw bad("dy_mm and dr_deg must be 0.1..100");
   }
   if (!std::isfinite(p.y0_mm()) || !std::isfinite(p.r0_deg()) || !(std::abs(p.stiffening()) <= 1.0)) {
     throw bad("y0_mm, r0_deg must be finite and |stiffening| <= 1");

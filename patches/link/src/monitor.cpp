@@ -298,7 +298,11 @@ void Monitor::OnFrame(const FrameIn& f, Now now, MessageSink& sink) noexcept {
       c.force_n = Finite(o.force_n);
       c.uncertainty = pipeline_.calibrated_uncertainty();
       c.force_sd_n = c.uncertainty ? Finite(o.force_sd_n) : 0.0f;
-      c.located = o.located && std::isfinite(o.y_mm) && std::isfinite(o.r_deg);
+      // A covariance that is not finite would be sent as 0 (a perfectly confident place): such a frame is sent
+      // as force only, not located.
+      const bool cov_ok = !c.uncertainty || (std::isfinite(o.cov_yy_mm2) && std::isfinite(o.cov_yr_mm2) &&
+                                              std::isfinite(o.cov_rr_mm2));
+      c.located = o.located && std::isfinite(o.y_mm) && std::isfinite(o.r_deg) && cov_ok;
       if (c.located) {
         c.y_mm = o.y_mm;
         c.r_deg = o.r_deg;

@@ -105,7 +105,9 @@ struct PipelineOutput {
   bool over_range = false;
   // Located, and the shifts show more than one touch (PipelineConfig::multi_*): the covariance holds them.
   bool multiple = false;
-  std::uint8_t touch_groups = 0;  // groups of moved gratings on a located frame (0 when not located)
+  // Located frames: touches seen (1; 2 when a pair explains a flagged frame; 0 when a flagged frame fits no
+  // pair, or nothing moved). 0 when not located.
+  std::uint8_t touch_groups = 0;
   Reason reason = Reason::kCapturing;
   std::uint8_t missing = 0;
 };

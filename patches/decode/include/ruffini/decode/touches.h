@@ -11,7 +11,7 @@
 // pipeline uses the places only: a place of weak response (far from every grating) explains a few pm with
 // any force, so the pair's forces are no measurement (a light touch's misfit can fit a pair of 10 N).
 //
-// Cost: the single check is a 5 x 5 node window (about 1 us); the two-touch fit, only on frames the check
+// Cost: the single check is a 5 x 5 node window (about 0.5 us); the two-touch fit, only on frames the check
 // flags, a few passes over the map's nodes. No allocation, no lock, no throw.
 #include <array>
 #include <cstdint>
