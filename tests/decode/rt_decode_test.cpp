@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 
 #include "../common/alloc_counter.h"
 #include "ruffini/decode/baseline.h"
@@ -73,10 +74,9 @@ TEST(RealTime, PipelineProcessDoesNotAllocate) {
 }
 
 
-// The same with a ResponseMap and frames two touches far apart: the check flags them and the two-touch fit
-// runs (once every multi_refit_s), still without allocating (review: the RT claim of touches.h was untested).
-TEST(RealTime, PipelineWithAResponseMapDoesNotAllocate) {
-  const auto spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
+// A synthetic model with calibrated uncertainty and a ResponseMap over the whole patch: a Gaussian bump of
+// sensitivity (10 mm sigma) at each grating.
+v1::DecoderModel ModelWithResponseMap(const patch::PatchSpec& spec) {
   auto m = testing::SyntheticModel(spec, 16);
   m.mutable_preprocessing()->set_common_mode_removed(true);
   auto* u = m.mutable_uncertainty();
@@ -89,7 +89,7 @@ TEST(RealTime, PipelineWithAResponseMapDoesNotAllocate) {
   r.ny = static_cast<int>(spec.extent_y_mm / r.dy_mm) + 1;
   r.nr = static_cast<int>(spec.extent_r_deg / r.dr_deg) + 1;
   r.g.resize(static_cast<std::size_t>(r.ny * r.nr));
-  const double mm_per_deg = spec.surface_radius_mm * 3.141592653589793 / 180.0;
+  const double mm_per_deg = spec.surface_radius_mm * std::numbers::pi / 180.0;
   for (int iy = 0; iy < r.ny; ++iy) {
     for (int ir = 0; ir < r.nr; ++ir) {
       for (std::size_t i = 0; i < 16; ++i) {
@@ -100,6 +100,14 @@ TEST(RealTime, PipelineWithAResponseMapDoesNotAllocate) {
     }
   }
   *m.mutable_response() = ToProto(r, 0.05, "rt test");
+  return m;
+}
+
+// The same with a ResponseMap and frames two touches far apart: the check flags them and the two-touch fit
+// runs (once every multi_refit_s), still without allocating (review: the RT claim of touches.h was untested).
+TEST(RealTime, PipelineWithAResponseMapDoesNotAllocate) {
+  const auto spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
+  const auto m = ModelWithResponseMap(spec);
   PipelineConfig cfg;
   cfg.baseline = BaselineFor(m, 1000.0);
   cfg.z_limit = 1e6;
@@ -129,29 +137,7 @@ TEST(RealTime, PipelineWithAResponseMapDoesNotAllocate) {
 // placed from a fresh fit, not at the old pair's centre.
 TEST(RealTime, TheTwoTouchCacheIsNotReusedAcrossAGap) {
   const auto spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
-  auto m = testing::SyntheticModel(spec, 16);
-  m.mutable_preprocessing()->set_common_mode_removed(true);
-  auto* u = m.mutable_uncertainty();
-  u->add_force_knots_n(0.1f);
-  u->add_force_sd_n(0.02f);
-  u->add_position_scale(2.0f);
-  ResponseModel r;
-  r.dy_mm = 1.5;
-  r.dr_deg = 2.0;
-  r.ny = static_cast<int>(spec.extent_y_mm / r.dy_mm) + 1;
-  r.nr = static_cast<int>(spec.extent_r_deg / r.dr_deg) + 1;
-  r.g.resize(static_cast<std::size_t>(r.ny * r.nr));
-  const double mm_per_deg = spec.surface_radius_mm * 3.141592653589793 / 180.0;
-  for (int iy = 0; iy < r.ny; ++iy) {
-    for (int ir = 0; ir < r.nr; ++ir) {
-      for (std::size_t i = 0; i < 16; ++i) {
-        const double dy = iy * r.dy_mm - spec.gratings[i].centre.y_mm;
-        const double da = (ir * r.dr_deg - spec.gratings[i].centre.r_deg) * mm_per_deg;
-        r.g[static_cast<std::size_t>(iy * r.nr + ir)][i] = static_cast<float>(100.0 * std::exp(-(dy * dy + da * da) / 200.0));
-      }
-    }
-  }
-  *m.mutable_response() = ToProto(r, 0.05, "rt test");
+  const auto m = ModelWithResponseMap(spec);
   PipelineConfig cfg;
   cfg.baseline = BaselineFor(m, 1000.0);
   cfg.z_limit = 1e6;

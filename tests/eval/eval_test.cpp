@@ -83,20 +83,23 @@ TEST(EvaluateTest, KnownErrorsAndMissedFrames) {
   EXPECT_EQ(ev.location_frames, 96u);
 }
 
+// One 100 Hz frame appended to d: force f (load cell and true), the probe at (y, r), indentation id.
+void AppendFrame(dataset::Dataset& d, float f, float y, float r, int id) {
+  dataset::Frame fr;
+  fr.t_s = static_cast<double>(d.size()) * 0.01;
+  fr.serial = d.size();
+  fr.force_n = fr.true_force_n = f;
+  fr.y_mm = y;
+  fr.r_deg = r;
+  fr.indentation = id;
+  d.Append(fr);
+}
+
 // ScoreStream on constructed data: a rest of 200 frames, then 10 indentations of 100 frames (0..1.98 N).
 dataset::Dataset StreamData() {
   dataset::Dataset d;
   d.info.sample_rate_hz = 100.0;
-  auto add = [&](float f, float y, float r, int id) {
-    dataset::Frame fr;
-    fr.t_s = static_cast<double>(d.size()) * 0.01;
-    fr.serial = d.size();
-    fr.force_n = fr.true_force_n = f;
-    fr.y_mm = y;
-    fr.r_deg = r;
-    fr.indentation = id;
-    d.Append(fr);
-  };
+  auto add = [&](float f, float y, float r, int id) { AppendFrame(d, f, y, r, id); };
   for (int k = 0; k < 200; ++k) add(0.0f, NAN, NAN, -1);
   for (int i = 0; i < 10; ++i) {
     for (int k = 0; k < 100; ++k) add(0.02f * static_cast<float>(k), 30.0f + 8.0f * static_cast<float>(i), 40.0f + 6.0f * static_cast<float>(i), i);
@@ -188,16 +191,7 @@ TEST(ScoreStreamTest, MissesScoreAsFailuresAndFalseContactsCount) {
 TEST(ScoreStreamTest, PressesNearAnEdgeAreScoredApart) {
   dataset::Dataset d;
   d.info.sample_rate_hz = 100.0;
-  auto add = [&](float f, float y, float r, int id) {
-    dataset::Frame fr;
-    fr.t_s = static_cast<double>(d.size()) * 0.01;
-    fr.serial = d.size();
-    fr.force_n = fr.true_force_n = f;
-    fr.y_mm = y;
-    fr.r_deg = r;
-    fr.indentation = id;
-    d.Append(fr);
-  };
+  auto add = [&](float f, float y, float r, int id) { AppendFrame(d, f, y, r, id); };
   for (int k = 0; k < 50; ++k) add(0.0f, NAN, NAN, -1);
   // 0: 4 mm from the elbow edge (Y = 0); 1: the centre; 2: R 10 deg = 6.5 mm of arc from the R = 0 edge;
   // 3: R 128 deg, 11.1 mm of arc from the R = 145 edge (interior by 1 mm).

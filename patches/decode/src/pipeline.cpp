@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <span>
 
 #include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
@@ -167,6 +168,27 @@ float Pipeline<Scalar>::Interp(const std::vector<float>& ys, float x) const noex
   return ys[k - 1] + t * (ys[k] - ys[k - 1]);
 }
 
+namespace {
+
+// Widens out's covariance (Y, arc mm) so that every place of `places` (Y mm, arc mm) lies within 1 sigma of
+// (cy, ca): the sum of their offsets' outer products bounds each one's; plus margin_mm in every direction.
+void WidenToHold(PipelineOutput& out, std::span<const std::array<double, 2>> places, double cy, double ca,
+                 double margin_mm) noexcept {
+  const double m2 = margin_mm * margin_mm;
+  double yy = m2, ya = 0, aa = m2;
+  for (const auto& p : places) {
+    const double dy = p[0] - cy, da = p[1] - ca;
+    yy += dy * dy;
+    ya += dy * da;
+    aa += da * da;
+  }
+  out.cov_yy_mm2 += static_cast<float>(yy);
+  out.cov_yr_mm2 += static_cast<float>(ya);
+  out.cov_rr_mm2 += static_cast<float>(aa);
+}
+
+}  // namespace
+
 template <typename Scalar>
 int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& d) const noexcept {
   static_assert(kGratings <= 16, "linked_ holds one bit per grating");
@@ -208,17 +230,9 @@ int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& 
       out.y_mm = static_cast<float>(cy);
       out.r_deg = static_cast<float>(cr);
       if (cal) {
-        const double m2 = config_.multi_margin_mm * config_.multi_margin_mm;
-        double yy = m2, ya = 0, aa = m2;
-        for (const Touch& t : v.touch) {
-          const double dy = t.y_mm - cy, da = (t.r_deg - cr) * mm_per_deg_;
-          yy += dy * dy;
-          ya += dy * da;
-          aa += da * da;
-        }
-        out.cov_yy_mm2 += static_cast<float>(yy);
-        out.cov_yr_mm2 += static_cast<float>(ya);
-        out.cov_rr_mm2 += static_cast<float>(aa);
+        const std::array<std::array<double, 2>, 2> places{{{v.touch[0].y_mm, v.touch[0].r_deg * mm_per_deg_},
+                                                           {v.touch[1].y_mm, v.touch[1].r_deg * mm_per_deg_}}};
+        WidenToHold(out, places, cy, cr * mm_per_deg_, config_.multi_margin_mm);
       }
       return 2;
     }
@@ -235,6 +249,7 @@ int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& 
     double w = 0, y = 0, a = 0;
   };
   std::array<Group, kGratings> groups{};
+  std::array<std::array<double, 2>, kGratings> centres{};
   int n = 0;
   std::uint32_t left = moved;
   while (left != 0) {
@@ -259,20 +274,13 @@ int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& 
   if (n < 2 || !out.located) return n;
   out.multiple = true;
   if (!std::isfinite(out.cov_yy_mm2)) return n;  // no calibrated uncertainty: the flag says it
-  // Widen: add every group centre's offset from the reported place as an outer product (then each centre is
-  // within 1 sigma), and the margin in every direction.
-  const double py = out.y_mm, pa = out.r_deg * mm_per_deg_, m2 = config_.multi_margin_mm * config_.multi_margin_mm;
-  double yy = m2, ya = 0, aa = m2;
+  // Widen so that every group's centre is within 1 sigma of the reported place, plus the margin.
   for (int k = 0; k < n; ++k) {
     const Group& g = groups[static_cast<std::size_t>(k)];
-    const double dy = g.y / g.w - py, da = g.a / g.w - pa;
-    yy += dy * dy;
-    ya += dy * da;
-    aa += da * da;
+    centres[static_cast<std::size_t>(k)] = {g.y / g.w, g.a / g.w};
   }
-  out.cov_yy_mm2 += static_cast<float>(yy);
-  out.cov_yr_mm2 += static_cast<float>(ya);
-  out.cov_rr_mm2 += static_cast<float>(aa);
+  WidenToHold(out, std::span<const std::array<double, 2>>(centres.data(), static_cast<std::size_t>(n)), out.y_mm,
+              out.r_deg * mm_per_deg_, config_.multi_margin_mm);
   return n;
 }
 
