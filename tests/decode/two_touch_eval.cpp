@@ -3,9 +3,13 @@
 // frame by frame over each hold (two_touch.h). Prints a markdown report.
 //
 //   two_touch_eval SCENE PATCH SEED PAIRS SINGLES AREA [model=FILE] [misfit=X] [margin=MM] [link=MM rel=X floor=PM]
+//                  [force=networks|largest|total k=X gain=PM_PER_N]
 //
 // model: another model file than the scene's; misfit: its ResponseMap's multiple_misfit; margin:
-// PipelineConfig::multi_margin_mm; link/rel/floor: the gratings' groups (models without a ResponseMap).
+// PipelineConfig::multi_margin_mm; link/rel/floor: the gratings' groups (models without a ResponseMap);
+// force/k/gain: PipelineConfig::multi_force, multi_force_k, multi_force_min_gain (what a found pair reports).
+// After the flag tables, a stop table: the same presses by force, then PAIRS light pairs and SINGLES light
+// singles (drawn after the others, so the flag tables do not move).
 //
 // AREA: `whole` (the patch, 2 mm from each edge) or Y0:Y1:R0:R1 (mm, deg: e.g. the surface a scene covers).
 // Positions: uniform over AREA; a pair's two touches at least 20 mm apart, each
@@ -49,6 +53,15 @@ struct Tally {
   }
 };
 
+struct StopTally {
+  int n = 0, stopped = 0;
+  void Add(bool stop) {
+    ++n;
+    stopped += stop;
+  }
+};
+enum StopKind { kPairAbove, kPairBelow, kLightPair, kSingleAbove, kSingleBelow, kSingleHalf, kStopKinds };
+
 double Pct(double a, double b) { return b > 0 ? 100.0 * a / b : 0.0; }
 
 double Median(std::vector<double> v) {
@@ -72,6 +85,7 @@ int main(int argc, char** argv) {
   if (argc < 7) {
     std::fprintf(stderr,
                  "usage: %s SCENE PATCH SEED PAIRS SINGLES AREA [model=FILE] [misfit=X] [margin=MM] [link=MM rel=X floor=PM]\n"
+                 "       [force=networks|largest|total k=X gain=PM_PER_N]\n"
                  "  AREA: whole | Y0:Y1:R0:R1\n",
                  argv[0]);
     return 2;
@@ -96,6 +110,15 @@ int main(int argc, char** argv) {
       else if (k == "link") knobs.multi_link_mm = std::stod(v);
       else if (k == "rel") knobs.multi_rel = std::stod(v);
       else if (k == "floor") knobs.multi_floor_pm = std::stod(v);
+      else if (k == "force") {
+        using MF = decode::PipelineConfig::MultiForce;
+        if (v == "networks") knobs.multi_force = MF::kNetworks;
+        else if (v == "largest") knobs.multi_force = MF::kLargest;
+        else if (v == "total") knobs.multi_force = MF::kTotal;
+        else throw std::runtime_error("force: networks, largest or total (got '" + v + "')");
+      }
+      else if (k == "k") knobs.multi_force_k = std::stod(v);
+      else if (k == "gain") knobs.multi_force_min_gain = std::stod(v);
       else throw std::runtime_error("unknown knob '" + k + "'");
     }
     v1::DecoderModel model = decode::LoadModel(model_path);
@@ -108,6 +131,9 @@ int main(int argc, char** argv) {
     rig.pipeline_config().multi_link_mm = knobs.multi_link_mm;
     rig.pipeline_config().multi_rel = knobs.multi_rel;
     rig.pipeline_config().multi_floor_pm = knobs.multi_floor_pm;
+    rig.pipeline_config().multi_force = knobs.multi_force;
+    rig.pipeline_config().multi_force_k = knobs.multi_force_k;
+    rig.pipeline_config().multi_force_min_gain = knobs.multi_force_min_gain;
     const decode::PipelineConfig& pc = rig.pipeline_config();
     const patch::PatchSpec& spec = scene.patches[patch].spec;
     const double mm_per_deg = testing::MmPerDeg(scene, patch);
@@ -135,6 +161,7 @@ int main(int argc, char** argv) {
                   model_path.c_str(), pc.multi_link_mm, pc.multi_rel, pc.multi_floor_pm, pc.multi_margin_mm);
     }
     Tally by_sep[3], all_pairs, single;
+    StopTally stops[kStopKinds];
     std::uint64_t k = 0;
     for (int i = 0; i < pairs; ++i) {
       ProbeAt p[2];
@@ -149,6 +176,13 @@ int main(int argc, char** argv) {
       const testing::PressOutcome o = rig.Press(std::span<const ProbeAt>(p, 2), 1.5, twin::DeriveSeed(seed, ++k));
       const PressJudgement j = JudgePress(o, std::span<const ProbeAt>(p, 2), mm_per_deg);
       all_pairs.Add(j, o, p[0].force_n + p[1].force_n);
+      const double larger = std::max(p[0].force_n, p[1].force_n);
+      if (larger >= 1.65) stops[kPairAbove].Add(o.stops());
+      if (larger >= 1.65 && !o.stops() && std::getenv("TWO_TOUCH_VERBOSE")) {
+        std::fprintf(stderr, "pair not stopped: (%.1f, %.1f, %.2f N) (%.1f, %.1f, %.2f N), largest reported %.2f N\n", p[0].y_mm,
+                     p[0].r_deg, p[0].force_n, p[1].y_mm, p[1].r_deg, p[1].force_n, o.max_force_n);
+      }
+      else if (larger <= 1.35) stops[kPairBelow].Add(o.stops());
       by_sep[sep < 30 ? 0 : sep < 50 ? 1 : 2].Add(j, o, p[0].force_n + p[1].force_n);
       if (std::getenv("TWO_TOUCH_VERBOSE") && j.confident_wrong > 0) {
         std::fprintf(stderr, "pair (%.1f, %.1f, %.2f N) (%.1f, %.1f, %.2f N) sep %.1f: %d located, %d flagged, %d confident wrong\n",
@@ -161,6 +195,32 @@ int main(int argc, char** argv) {
       const ProbeAt p{y, r, single_force(rng)};
       const testing::PressOutcome o = rig.Press(std::span<const ProbeAt>(&p, 1), 1.5, twin::DeriveSeed(seed, ++k));
       single.Add(JudgePress(o, std::span<const ProbeAt>(&p, 1), mm_per_deg), o, p.force_n);
+      if (p.force_n >= 1.65) stops[kSingleAbove].Add(o.stops());
+      else if (p.force_n <= 0.75) stops[kSingleHalf].Add(o.stops());
+      else if (p.force_n <= 1.35) stops[kSingleBelow].Add(o.stops());
+    }
+    // The stop rule (issue 16: a second touch must not hide the first one's STOP, and a light press must not
+    // stop): the same pairs and singles by force, plus light pairs (each touch 0.2-0.7 N, the sum below the
+    // threshold) and light singles (0.1-1.35 N, at most 0.9 x the threshold).
+    std::uniform_real_distribution<double> light_pair_force(0.2, 0.7), light_single_force(0.1, 1.35);
+    for (int i = 0; i < pairs; ++i) {
+      ProbeAt p[2];
+      double sep = 0;
+      do {
+        const auto [y0, r0] = point();
+        const auto [y1, r1] = point();
+        p[0] = {y0, r0, light_pair_force(rng)};
+        p[1] = {y1, r1, light_pair_force(rng)};
+        sep = std::hypot(y1 - y0, (r1 - r0) * mm_per_deg);
+      } while (sep < 20.0);
+      const testing::PressOutcome o = rig.Press(std::span<const ProbeAt>(p, 2), 1.5, twin::DeriveSeed(seed, ++k));
+      stops[kLightPair].Add(o.stops());
+    }
+    for (int i = 0; i < singles; ++i) {
+      const auto [y, r] = point();
+      const ProbeAt p{y, r, light_single_force(rng)};
+      const testing::PressOutcome o = rig.Press(std::span<const ProbeAt>(&p, 1), 1.5, twin::DeriveSeed(seed, ++k));
+      stops[p.force_n <= 0.75 ? kSingleHalf : kSingleBelow].Add(o.stops());
     }
     std::printf(
         "A press counts when some hold frame was located. **Flagged**: most of its located hold frames say "
@@ -174,6 +234,21 @@ int main(int argc, char** argv) {
     Row("two touches, 50 mm or more", by_sep[2]);
     Row("**two touches, all**", all_pairs);
     Row("**one touch** (false flags)", single);
+    std::printf("\n**The stop rule** (threshold 1.5 N; a press stops on a contact above it, an over-range contact or a "
+                "fault; `multi_force` %s, k %.2f, min gain %.2f pm/N):\n\n",
+                pc.multi_force == decode::PipelineConfig::MultiForce::kNetworks  ? "networks"
+                : pc.multi_force == decode::PipelineConfig::MultiForce::kLargest ? "largest"
+                                                                                 : "total",
+                pc.multi_force_k, pc.multi_force_min_gain);
+    std::printf("| presses | should | n | stopped |\n| --- | --- | --- | --- |\n");
+    const char* names[kStopKinds] = {"two touches, the larger at least 1.65 N (1.1 x)", "two touches, both at most 1.35 N (sum above)",
+                                     "two touches, each 0.2-0.7 N (sum below)", "one touch, at least 1.65 N",
+                                     "one touch, 0.75-1.35 N", "one touch, at most 0.75 N (0.5 x)"};
+    const char* should[kStopKinds] = {"stop", "(sum: stop)", "not stop", "stop", "not stop", "not stop"};
+    for (int i = 0; i < kStopKinds; ++i) {
+      std::printf("| %s | %s | %d | %d (%.1f %%) |\n", names[i], should[i], stops[i].n, stops[i].stopped,
+                  Pct(stops[i].stopped, stops[i].n));
+    }
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "two_touch_eval: %s\n", e.what());

@@ -117,6 +117,10 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
   if (!(config_.over_range_force_n > 0 && config_.over_range_force_n < 1e6) || config_.over_range_missing < 1) {
     throw InputError("pipeline: over_range_force_n must be > 0 and over_range_missing >= 1");
   }
+  if (!(config_.multi_force_k >= 0 && config_.multi_force_k <= 100 && config_.multi_force_min_gain >= 0 &&
+        std::isfinite(config_.multi_force_min_gain))) {
+    throw InputError("pipeline: multi_force_k must be 0..100 and multi_force_min_gain >= 0");
+  }
   if (!(config_.quiet_release_pm >= 0 && config_.quiet_release_drop >= 0)) {
     throw InputError("pipeline: quiet_release_pm and quiet_release_drop must be >= 0");
   }
@@ -190,6 +194,26 @@ void WidenToHold(PipelineOutput& out, std::span<const std::array<double, 2>> pla
 }  // namespace
 
 template <typename Scalar>
+void Pipeline<Scalar>::RaiseForPair(const TouchVerdict& v, PipelineOutput& out) const noexcept {
+  using MF = PipelineConfig::MultiForce;
+  if (config_.multi_force == MF::kNetworks) return;
+  double bound[2] = {0.0, 0.0}, sd[2] = {0.0, 0.0};
+  for (int k = 0; k < 2; ++k) {
+    const Touch& t = v.touch[static_cast<std::size_t>(k)];
+    if (!(t.gain_pm_per_n >= config_.multi_force_min_gain) || !std::isfinite(t.force_sd_n) || !std::isfinite(t.force_n)) continue;
+    bound[k] = std::max(0.0, t.force_n - config_.multi_force_k * t.force_sd_n);
+    sd[k] = t.force_sd_n;
+  }
+  const bool total = config_.multi_force == MF::kTotal;
+  const double force = total ? bound[0] + bound[1] : std::max(bound[0], bound[1]);
+  if (!(force > out.force_n) || !std::isfinite(force)) return;
+  out.force_n = static_cast<float>(force);
+  // The sd of what is now reported (a sum: both touches' in quadrature), never below the networks'.
+  const double s = total ? std::hypot(sd[0], sd[1]) : (bound[0] >= bound[1] ? sd[0] : sd[1]);
+  if (std::isfinite(out.force_sd_n)) out.force_sd_n = std::max(out.force_sd_n, static_cast<float>(s));
+}
+
+template <typename Scalar>
 int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& d) const noexcept {
   static_assert(kGratings <= 16, "linked_ holds one bit per grating");
   float peak = 0.0f;
@@ -216,13 +240,13 @@ int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& 
       ++d.pair_age_;
       v.found = d.pair_.found;
       v.touch = d.pair_.touch;
+      touches_->Amplitudes(shift, v);  // the cached places, this frame's forces
     }
     out.multiple = true;
     const bool cal = std::isfinite(out.cov_yy_mm2);
     if (v.found == 2) {
-      // One place, the pair's centre of pressure, with the covariance holding both places. The force stays the
-      // networks' reading: the pair's forces are not trusted (a place of weak response explains a few pm with
-      // any force, so a light touch's misfit can fit a pair of 10 N), and the stop rule must not move.
+      RaiseForPair(v, out);
+      // One place, the pair's centre of pressure, with the covariance holding both places.
       const double total = v.touch[0].force_n + v.touch[1].force_n;
       const double w0 = total > 0 ? v.touch[0].force_n / total : 0.5;
       const double cy = w0 * v.touch[0].y_mm + (1 - w0) * v.touch[1].y_mm;

@@ -164,14 +164,70 @@ TouchVerdict TouchCheck::Check(const ShiftsPm& shift, double y_mm, double r_deg,
   }
   const double pair_cost = best.cost;
   const int p_node = best.p, q_node = best.q;
-  const double a_p = best.a_p, a_q = best.a_q;
   v.misfit_two = std::clamp(pair_cost / energy, 0.0, 1.0);
   // The pair explains the frame when it leaves at most the limit's misfit (what one touch is allowed).
   if (!(v.misfit_two <= limit_)) return v;
   v.found = 2;
-  v.touch[0] = Place(p_node, a_p);
-  v.touch[1] = Place(q_node, a_q);
+  SolvePair(shift, p_node, q_node, v);
   return v;
+}
+
+void TouchCheck::SolvePair(const ShiftsPm& shift, int p, int q, TouchVerdict& v) const noexcept {
+  const Frame f = Prepare(shift);
+  const auto& g = model_.g[static_cast<std::size_t>(p)];
+  const auto& h = model_.g[static_cast<std::size_t>(q)];
+  double sg = 0, sh = 0, gg = 0, hh = 0, gh = 0;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    sg += f.use[i] * f.s[i] * g[i];
+    sh += f.use[i] * f.s[i] * h[i];
+    gg += f.use[i] * static_cast<double>(g[i]) * g[i];
+    hh += f.use[i] * static_cast<double>(h[i]) * h[i];
+    gh += f.use[i] * static_cast<double>(g[i]) * h[i];
+  }
+  const double det = gg * hh - gh * gh;
+  double a = 0, b = 0;
+  if (det > 1e-9 * gg * hh && gg > 0 && hh > 0) {
+    a = (sg * hh - sh * gh) / det;
+    b = (sh * gg - sg * gh) / det;
+    if (a < 0) {
+      a = 0;
+      b = std::max(0.0, sh / hh);
+    } else if (b < 0) {
+      b = 0;
+      a = std::max(0.0, sg / gg);
+    }
+  }
+  v.touch[0] = Place(p, a);
+  v.touch[1] = Place(q, b);
+  v.touch[0].node = p;
+  v.touch[1].node = q;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    v.touch[0].gain_pm_per_n = std::max(v.touch[0].gain_pm_per_n, std::abs(static_cast<double>(g[i])));
+    v.touch[1].gain_pm_per_n = std::max(v.touch[1].gain_pm_per_n, std::abs(static_cast<double>(h[i])));
+  }
+  if (!(det > 1e-9 * gg * hh && gg > 0 && hh > 0) || f.n <= 2) {
+    v.touch[0].force_sd_n = v.touch[1].force_sd_n = std::numeric_limits<double>::infinity();
+    return;
+  }
+  // The residual per grating is the noise the amplitudes are read against (the map's own error grows with the
+  // force, so it is in the residual too); never below the interrogator's and the baseline's kNoisePm.
+  const double cost = std::max(0.0, f.ss - 2 * (a * sg + b * sh) + a * a * gg + 2 * a * b * gh + b * b * hh);
+  const double noise2 = std::max(kNoisePm * kNoisePm, cost / (f.n - 2));
+  const double sd_a = std::sqrt(noise2 * hh / det), sd_b = std::sqrt(noise2 * gg / det);
+  // amplitude = F (1 + c F): dF/da = 1 / (1 + 2 c F).
+  const auto sd_force = [&](double sd_amp, double force) {
+    const double slope = 1.0 + 2.0 * model_.stiffening * force;
+    return slope > 0.1 ? sd_amp / slope : sd_amp / 0.1;
+  };
+  v.touch[0].force_sd_n = sd_force(sd_a, v.touch[0].force_n);
+  v.touch[1].force_sd_n = sd_force(sd_b, v.touch[1].force_n);
+}
+
+void TouchCheck::Amplitudes(const ShiftsPm& shift, TouchVerdict& pair) const noexcept {
+  const int p = pair.touch[0].node, q = pair.touch[1].node;
+  const int nodes = model_.ny * model_.nr;
+  if (pair.found != 2 || p < 0 || q < 0 || p >= nodes || q >= nodes) return;
+  SolvePair(shift, p, q, pair);
 }
 
 v1::ResponseMap ToProto(const ResponseModel& m, double multiple_misfit, const std::string& source) {

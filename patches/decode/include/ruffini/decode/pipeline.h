@@ -86,6 +86,19 @@ struct PipelineConfig {
   // While frames stay flagged, the two-touch fit (about 100 us) runs once every multi_refit_s; the frames in
   // between reuse its places. 0: every frame.
   double multi_refit_s = 0.01;
+  // What a frame flagged `multiple` whose pair the response map explains reports as its force (the stop rule
+  // compares it with the threshold; docs/decoders.md "Two touches"). The networks read a pair as one touch
+  // they were never shown, sometimes below either touch. Each fitted touch counts at its lower bound,
+  // force - multi_force_k x its sd (0 at the least), and only where its place moves some grating by at least
+  // multi_force_min_gain pm/N (a place far from every grating explains a few pm with any force):
+  //   kNetworks: the networks' force, whatever the pair (before v1.4);
+  //   kLargest:  the larger of the networks' force and the larger touch's bound;
+  //   kTotal:    the larger of the networks' force and the sum of both touches' bounds.
+  // The force is only ever raised. Chosen on validation presses (docs/experiments/two-touches.md).
+  enum class MultiForce : std::uint8_t { kNetworks, kLargest, kTotal };
+  MultiForce multi_force = MultiForce::kLargest;
+  double multi_force_k = 2.0;
+  double multi_force_min_gain = 3.0;
 };
 
 struct PipelineOutput {
@@ -166,6 +179,8 @@ class Pipeline {
   // Groups the moved gratings of a frame; widens out's covariance (when calibrated) when there are two or
   // more. Returns the number of groups.
   int Touches(const ShiftsPm& shift, PipelineOutput& out, Data& d) const noexcept;
+  // A found pair's force for the stop rule (PipelineConfig::multi_force): raises out.force_n, never lowers it.
+  void RaiseForPair(const TouchVerdict& v, PipelineOutput& out) const noexcept;
 
   NetworkDecoder<Scalar> decoder_;
   PipelineConfig config_;

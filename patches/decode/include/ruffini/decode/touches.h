@@ -7,14 +7,17 @@
 // best explains the shifts (amplitude in closed form at each node of a small window) and measures the misfit,
 // the residual's share of the shifts' energy (with a noise allowance, so a light touch's noise is no misfit).
 // Above the model's limit the frame is not one touch: a two-touch fit (each place searched over the whole map
-// while the other is held, amplitudes by non-negative least squares) then gives both places and forces. The
-// pipeline uses the places only: a place of weak response (far from every grating) explains a few pm with
-// any force, so the pair's forces are no measurement (a light touch's misfit can fit a pair of 10 N).
+// while the other is held, amplitudes by non-negative least squares) then gives both places and forces, each
+// force with its sd (the residual over how strongly the place moves the gratings). The pipeline places the
+// contact at the pair's centre of pressure and may raise its force to a touch's lower bound
+// (PipelineConfig::multi_force): a place of weak response (far from every grating) explains a few pm with any
+// force, so a force counts only where its place is seen well (a light touch's misfit can fit a pair of 10 N).
 //
 // Cost: the single check is a 5 x 5 node window (about 0.5 us); the two-touch fit, only on frames the check
 // flags, a few passes over the map's nodes. No allocation, no lock, no throw.
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "ruffini/decode/inversion.h"
@@ -24,6 +27,11 @@ namespace ruffini::decode {
 
 struct Touch {
   double y_mm = 0.0, r_deg = 0.0, force_n = 0.0;
+  // The force's 1-sigma from the fit: the residual per grating over how strongly the place moves the
+  // gratings (with the other touch's share taken out). A place far from every grating has a large sd.
+  double force_sd_n = std::numeric_limits<double>::infinity();
+  double gain_pm_per_n = 0.0;  // the place's largest response, max_i |g_i| (pm/N): how strongly it is seen
+  int node = -1;  // the map node (internal: Amplitudes re-solves the forces there)
 };
 
 struct TouchVerdict {
@@ -42,6 +50,10 @@ class TouchCheck {
   // fit_pair false: a frame flagged multiple gets no two-touch fit (found stays 0; the caller reuses a recent
   // one). The fit is the check's costly part (about 100 us).
   TouchVerdict Check(const ShiftsPm& shift_pm, double y_mm, double r_deg, bool fit_pair = true) const noexcept;
+  // A found pair's forces (and sds) re-solved on this frame's shifts at the pair's places: the frames between
+  // two fits follow the touches' forces (a 2 x 2 least squares, well under a microsecond). A pair that no
+  // longer fits with both amplitudes >= 0 keeps found 2 with the force of the touch that went negative 0.
+  void Amplitudes(const ShiftsPm& shift_pm, TouchVerdict& pair) const noexcept;
   [[nodiscard]] double limit() const noexcept { return limit_; }
   [[nodiscard]] const ResponseModel& model() const noexcept { return model_; }
 
@@ -56,6 +68,8 @@ class TouchCheck {
   Best SearchPair(const ShiftsPm& s, int other, int iy0, int iy1, int ir0, int ir1, int stride, double& a_other) const noexcept;
   [[nodiscard]] double Force(double amplitude) const noexcept;
   [[nodiscard]] Touch Place(int node, double amplitude) const noexcept;
+  // Forces and sds of the pair (p, q) on s: non-negative least squares, the residual as the noise.
+  void SolvePair(const ShiftsPm& s, int p, int q, TouchVerdict& v) const noexcept;
 
   ResponseModel model_;
   double limit_ = 0.0;
