@@ -613,17 +613,38 @@ class MonitoredStream {
     return sink_.first;
   }
 
-  // The largest contact force sent since the last call (0 if none).
-  float TakeMaxForce() noexcept { return std::exchange(sink_.max_force_n, 0.0f); }
+  // The contact forces sent since the last call: the largest (0 if none), their mean and standard deviation
+  // (NaN if none).
+  struct Forces {
+    float max_n = 0.0f;
+    double mean_n = std::numeric_limits<double>::quiet_NaN(), sd_n = std::numeric_limits<double>::quiet_NaN();
+    std::size_t count = 0;
+  };
+  Forces TakeForces() noexcept {
+    Forces f;
+    f.max_n = std::exchange(sink_.max_force_n, 0.0f);
+    f.count = std::exchange(sink_.count, 0);
+    const double sum = std::exchange(sink_.sum_n, 0.0), sum2 = std::exchange(sink_.sum2_n2, 0.0);
+    if (f.count > 0) {
+      f.mean_n = sum / static_cast<double>(f.count);
+      f.sd_n = std::sqrt(std::max(0.0, sum2 / static_cast<double>(f.count) - f.mean_n * f.mean_n));
+    }
+    return f;
+  }
 
  private:
   struct Sink final : link::MessageSink {
     const StopRule* rule = nullptr;
     StopCause first = StopCause::kNone;
     float max_force_n = 0.0f;
+    double sum_n = 0.0, sum2_n2 = 0.0;
+    std::size_t count = 0;
     void Push(const link::Message& m) noexcept override {
       if (m.kind == link::Message::Kind::kContact && std::isfinite(m.contact.force_n)) {
         max_force_n = std::max(max_force_n, m.contact.force_n);
+        sum_n += m.contact.force_n;
+        sum2_n2 += static_cast<double>(m.contact.force_n) * m.contact.force_n;
+        ++count;
       }
       if (first == StopCause::kNone) first = rule->Judge(m);
     }
@@ -651,7 +672,7 @@ StopCause UntouchedStart(MonitoredStream& s, double rate_hz) {
     const StopCause c = s.Frame(nullptr);
     if (first == StopCause::kNone) first = c;
   }
-  s.TakeMaxForce();
+  s.TakeForces();
   return first;
 }
 
@@ -693,7 +714,7 @@ LightPoint MeasureLight(const PatchUnderTest& put, const StopRule& rule, const T
       const StopCause c = s.Frame(w > 0 ? &contact : nullptr);
       if (first == StopCause::kNone) first = c;
     }
-    out.max_force_n = std::max(out.max_force_n, s.TakeMaxForce());
+    out.max_force_n = std::max(out.max_force_n, s.TakeForces().max_n);
     if (first != StopCause::kNone) {
       ++out.stopped;
       ++out.by_cause[static_cast<std::size_t>(first)];
@@ -708,10 +729,15 @@ struct SlowPoint {
   double true_force_n = std::numeric_limits<double>::quiet_NaN();  // the true force then (NaN: none in the ramp)
   bool in_release = false;             // the first stop came after the ramp's top
   float max_force_n = 0.0f;            // the largest contact force sent during the ramp
+  // The contact forces sent while the true force was within +-kNearThreshold of the threshold: their mean
+  // (the decoder's bias there) and standard deviation (its noise); NaN when none was sent.
+  double near_mean_n = std::numeric_limits<double>::quiet_NaN(), near_sd_n = std::numeric_limits<double>::quiet_NaN();
 };
+constexpr double kNearThreshold = 0.03;
 
 // One slow press at the point (no jitter): 0 -> slow_top_n at slow_rate_n_per_s, released over 0.3 s, 0.5 s
-// of rest. The first stop's time and the true force then; a stop during the untouched start is one at 0 N.
+// of rest. The first stop's time and the true force then (a stop during the untouched start is one at 0 N),
+// and the decoded force around the true crossing (the whole ramp is pressed, whenever the first stop came).
 SlowPoint MeasureSlow(const PatchUnderTest& put, const StopRule& rule, const TargetsArgs& a, double y_mm, double r_deg,
                       std::uint64_t seed) {
   MonitoredStream s(put, rule, a.rate_hz, seed);
@@ -720,24 +746,38 @@ SlowPoint MeasureSlow(const PatchUnderTest& put, const StopRule& rule, const Tar
     out.cause = c;
     out.t_s = 0.0;
     out.true_force_n = 0.0;
-    return out;
   }
   const double ramp = a.slow_top_n / a.slow_rate_n_per_s, release = 0.3, rest = 0.5;
+  const double near_lo = (1 - kNearThreshold) * rule.threshold_n, near_hi = (1 + kNearThreshold) * rule.threshold_n;
   const int n = static_cast<int>((ramp + release + rest) * a.rate_hz);
+  // The stream's parts: 0 the ramp below the window around the threshold, 1 the window, 2 the ramp above it,
+  // 3 the release and rest. The forces sent are taken at each change (a frame's messages belong to its part).
+  int part = 0;
+  const auto take = [&] {
+    const MonitoredStream::Forces f = s.TakeForces();
+    if (part <= 2) out.max_force_n = std::max(out.max_force_n, f.max_n);
+    if (part == 1) {
+      out.near_mean_n = f.mean_n;
+      out.near_sd_n = f.sd_n;
+    }
+  };
   for (int k = 0; k < n; ++k) {
     const double t = k / a.rate_hz;
     double f = 0.0;
     if (t <= ramp) f = a.slow_rate_n_per_s * t;
     else if (t < ramp + release) f = a.slow_top_n * (1.0 - (t - ramp) / release);
+    const int now = t > ramp ? 3 : f > near_hi ? 2 : f >= near_lo ? 1 : 0;
+    while (part < now) {  // a window shorter than a frame is passed through, and taken empty
+      take();
+      ++part;
+    }
     const twin::Contact contact{{y_mm, r_deg}, f, put.scene().probe};
     const StopCause c = s.Frame(f > 0 ? &contact : nullptr);
-    if (t <= ramp) out.max_force_n = std::max(out.max_force_n, s.TakeMaxForce());
-    if (c != StopCause::kNone) {
+    if (c != StopCause::kNone && out.cause == StopCause::kNone) {
       out.cause = c;
       out.t_s = t;
       if (t <= ramp) out.true_force_n = f;
       else out.in_release = true;
-      break;
     }
   }
   return out;
@@ -893,11 +933,17 @@ std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const Targe
   const double t_cross = rule.threshold_n / a.slow_rate_n_per_s;
   std::size_t within = 0, early = 0, late = 0, in_release = 0, never = 0;
   std::array<std::size_t, kStopCauses> by_cause{};
-  std::vector<double> forces, delays;
+  std::vector<double> forces, delays, near_means, near_sds;
   std::vector<std::size_t> failing;
+  std::size_t early_biased = 0;
   for (std::size_t k = 0; k < n; ++k) {
     const SlowPoint& p = res[k];
     ++by_cause[static_cast<std::size_t>(p.cause)];
+    if (std::isfinite(p.near_mean_n)) {
+      near_means.push_back(p.near_mean_n);
+      near_sds.push_back(p.near_sd_n);
+    }
+    if (std::isfinite(p.true_force_n) && p.true_force_n < lo && p.near_mean_n > rule.threshold_n) ++early_biased;
     if (std::isfinite(p.true_force_n)) {
       forces.push_back(p.true_force_n);
       delays.push_back(p.t_s - t_cross);
@@ -929,25 +975,35 @@ std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const Targe
       << Fmt(Quantile(forces, 0.05), "%.3f") << " / " << Fmt(Quantile(forces, 0.5), "%.3f") << " / "
       << Fmt(Quantile(forces, 0.95), "%.3f") << " N |\n"
       << "| delay after the true crossing, p50 / p95 (same points; negative: before it) | "
-      << Fmt(1e3 * Quantile(delays, 0.5), "%.0f") << " / " << Fmt(1e3 * Quantile(delays, 0.95), "%.0f") << " ms |\n\n";
+      << Fmt(1e3 * Quantile(delays, 0.5), "%.0f") << " / " << Fmt(1e3 * Quantile(delays, 0.95), "%.0f") << " ms |\n"
+      << "| decoded force while the true force is within +-" << Fmt(100 * kNearThreshold, "%.0f")
+      << " % of the threshold: its mean per point, p5 / p50 / p95 (the " << near_means.size()
+      << " points with contact frames there) | " << Fmt(Quantile(near_means, 0.05), "%.3f") << " / "
+      << Fmt(Quantile(near_means, 0.5), "%.3f") << " / " << Fmt(Quantile(near_means, 0.95), "%.3f") << " N |\n"
+      << "| its standard deviation per point (frame to frame), p50 / p95 | " << Fmt(Quantile(near_sds, 0.5), "%.3f")
+      << " / " << Fmt(Quantile(near_sds, 0.95), "%.3f") << " N |\n"
+      << "| early points whose mean there is above the threshold (biased high; the others stopped on the noise) | "
+      << early_biased << " of " << early << " |\n\n";
   if (!failing.empty()) {
     rep << "Points outside the band (" << failing.size() << "):\n\n"
-        << "| Y mm | R deg | true force at the first STOP, N | cause | largest force sent in the ramp, N |\n"
-        << "| --- | --- | --- | --- | --- |\n";
+        << "| Y mm | R deg | true force at the first STOP, N | cause | largest force sent in the ramp, N | decoded "
+           "force at the true threshold (+-" << Fmt(100 * kNearThreshold, "%.0f") << " %), mean +- sd, N |\n"
+        << "| --- | --- | --- | --- | --- | --- |\n";
     for (std::size_t k : failing) {
       const SlowPoint& p = res[k];
       rep << "| " << Fmt(g.y(k), "%.0f") << " | " << Fmt(g.r(k), "%.0f") << " | "
           << (p.cause == StopCause::kNone ? "no STOP" : p.in_release ? "only in the release" : Fmt(p.true_force_n, "%.3f"))
-          << " | " << kStopCauseName[static_cast<std::size_t>(p.cause)] << " | " << Fmt(p.max_force_n) << " |\n";
+          << " | " << kStopCauseName[static_cast<std::size_t>(p.cause)] << " | " << Fmt(p.max_force_n) << " | "
+          << (std::isfinite(p.near_mean_n) ? Fmt(p.near_mean_n) + " +- " + Fmt(p.near_sd_n) : "no contact") << " |\n";
     }
     rep << "\n";
   }
   if (!base.empty()) {
     std::vector<double> ratio(n);
     for (std::size_t k = 0; k < n; ++k) ratio[k] = res[k].true_force_n / rule.threshold_n;
-    SaveGridHeat(g.ys, g.rs, ratio, put, 0.0, 2.0,
+    SaveGridHeat(g.ys, g.rs, ratio, put, 0.5, 1.5,
                  "true force at the first STOP / threshold (band " + Fmt(1 - a.band) + ".." + Fmt(1 + a.band) +
-                     "); grey: none in the ramp",
+                     ", scale clipped to 0.5..1.5); grey: none in the ramp",
                  put.name() + ": slow press (" + Fmt(a.slow_rate_n_per_s) + " N/s), true force at the first STOP",
                  base + "-slow.svg");
     // The distribution: every point's ratio, sorted; the points without a stop in the ramp sit at the top.
