@@ -824,6 +824,24 @@ void SaveGridHeat(const std::vector<double>& ys, const std::vector<double>& rs, 
   fig.Save(path);
 }
 
+// The scene's accepted uncovered bands on the patch (safety.coverage.accepted_uncovered, docs/coverage.md):
+// where the scene admits its threshold is not guaranteed. The reports give every figure also for the covered
+// surface, the grid points outside them.
+struct Bands {
+  std::vector<safety::CoverageConfig::Band> bands;
+  // The first band holding the point, or nullptr.
+  [[nodiscard]] const safety::CoverageConfig::Band* Holding(double y_mm, double r_deg) const noexcept {
+    for (const auto& b : bands) {
+      if (y_mm >= b.y_min_mm && y_mm <= b.y_max_mm && r_deg >= b.r_min_deg && r_deg <= b.r_max_deg) return &b;
+    }
+    return nullptr;
+  }
+  [[nodiscard]] std::string Name(double y_mm, double r_deg) const {
+    const auto* b = Holding(y_mm, r_deg);
+    return b == nullptr ? "-" : b->name;
+  }
+};
+
 // The grid of a target: Y and arc every step_mm, edge_mm from each edge (as sensitivity's).
 struct Grid {
   std::vector<double> ys, rs;
@@ -850,7 +868,8 @@ std::string GridText(const Grid& g, double step_mm, double edge_mm) {
   return s.str();
 }
 
-std::string RunLight(const PatchUnderTest& put, const StopRule& rule, const TargetsArgs& a, const std::string& base) {
+std::string RunLight(const PatchUnderTest& put, const StopRule& rule, const Bands& bands, const TargetsArgs& a,
+                     const std::string& base) {
   const double force_n = a.force_n >= 0 ? a.force_n : a.light_factor * rule.threshold_n;
   const Grid g = MakeGrid(put, a.step_mm, a.edge_mm);
   const std::size_t n = g.size();
@@ -860,10 +879,15 @@ std::string RunLight(const PatchUnderTest& put, const StopRule& rule, const Targ
   ParallelFor(n, a.threads, "light presses " + put.name(), [&](std::size_t k) {
     res[k] = MeasureLight(put, rule, a, force_n, g.y(k), g.r(k), twin::DeriveSeed(a.seed, k));
   });
-  std::size_t clean = 0, stopped = 0, start = 0;
+  std::size_t clean = 0, stopped = 0, start = 0, covered = 0, covered_clean = 0, covered_stopped = 0;
   std::array<std::size_t, kStopCauses> by_cause{};
   std::vector<std::size_t> failing;
   for (std::size_t k = 0; k < n; ++k) {
+    if (bands.Holding(g.y(k), g.r(k)) == nullptr) {
+      ++covered;
+      covered_clean += res[k].clean() ? 1 : 0;
+      covered_stopped += res[k].stopped;
+    }
     clean += res[k].clean() ? 1 : 0;
     stopped += res[k].stopped;
     start += res[k].start != StopCause::kNone ? 1 : 0;
@@ -885,19 +909,23 @@ std::string RunLight(const PatchUnderTest& put, const StopRule& rule, const Targ
       << "| measure | value |\n| --- | --- |\n"
       << "| points with no STOP in any press (target >= 99 %) | " << clean << " of " << n << " (" << Pct(clean, n) << ") |\n"
       << "| presses that STOP (false stops) | " << stopped << " of " << presses << " (" << Pct(stopped, presses) << ") |\n"
+      << "| on the covered surface: points with no STOP / presses that STOP | " << covered_clean << " of " << covered
+      << " (" << Pct(covered_clean, covered) << ") / " << covered_stopped << " of " << covered * a.presses << " ("
+      << Pct(covered_stopped, covered * a.presses) << ") |\n"
       << "| of them by cause: force above the threshold / over range / doubt / fault | " << by_cause[1] << " / "
       << by_cause[2] << " / " << by_cause[3] << " / " << by_cause[4] << " |\n"
       << "| points with a STOP in the untouched start | " << start << " |\n\n";
   if (!failing.empty()) {
     rep << "Points with a STOP (" << failing.size() << ", most stops first):\n\n"
-        << "| Y mm | R deg | presses that STOP | largest force sent, N | causes (force / over range / doubt / fault) |\n"
-        << "| --- | --- | --- | --- | --- |\n";
+        << "| Y mm | R deg | presses that STOP | largest force sent, N | causes (force / over range / doubt / fault) | "
+           "accepted band |\n"
+        << "| --- | --- | --- | --- | --- | --- |\n";
     for (std::size_t k : failing) {
       const LightPoint& p = res[k];
       rep << "| " << Fmt(g.y(k), "%.0f") << " | " << Fmt(g.r(k), "%.0f") << " | " << p.stopped << " of " << a.presses
           << (p.start != StopCause::kNone ? std::string(" (and the start: ") + kStopCauseName[static_cast<std::size_t>(p.start)] + ")" : "")
           << " | " << Fmt(p.max_force_n) << " | " << p.by_cause[1] << " / " << p.by_cause[2] << " / " << p.by_cause[3]
-          << " / " << p.by_cause[4] << " |\n";
+          << " / " << p.by_cause[4] << " | " << bands.Name(g.y(k), g.r(k)) << " |\n";
     }
     rep << "\n";
   }
@@ -915,7 +943,8 @@ std::string RunLight(const PatchUnderTest& put, const StopRule& rule, const Targ
   return rep.str();
 }
 
-std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const TargetsArgs& a, const std::string& base) {
+std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const Bands& bands, const TargetsArgs& a,
+                    const std::string& base) {
   if (a.slow_top_n <= rule.threshold_n * (1 + a.band)) {
     throw InputError("--slow-top-n (" + Fmt(a.slow_top_n) + " N) must lie above the band's top (" +
                      Fmt(rule.threshold_n * (1 + a.band)) + " N)");
@@ -935,9 +964,16 @@ std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const Targe
   std::array<std::size_t, kStopCauses> by_cause{};
   std::vector<double> forces, delays, near_means, near_sds;
   std::vector<std::size_t> failing;
-  std::size_t early_biased = 0;
+  std::size_t early_biased = 0, covered = 0, covered_within = 0, covered_never = 0;
+  std::vector<double> covered_forces;
   for (std::size_t k = 0; k < n; ++k) {
     const SlowPoint& p = res[k];
+    if (bands.Holding(g.y(k), g.r(k)) == nullptr) {
+      ++covered;
+      covered_within += std::isfinite(p.true_force_n) && p.true_force_n >= lo && p.true_force_n <= hi ? 1 : 0;
+      covered_never += std::isfinite(p.true_force_n) ? 0 : 1;
+      if (std::isfinite(p.true_force_n)) covered_forces.push_back(p.true_force_n);
+    }
     ++by_cause[static_cast<std::size_t>(p.cause)];
     if (std::isfinite(p.near_mean_n)) {
       near_means.push_back(p.near_mean_n);
@@ -967,6 +1003,10 @@ std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const Targe
       << "| measure | value |\n| --- | --- |\n"
       << "| points whose first STOP is within the band (target >= 95 %) | " << within << " of " << n << " ("
       << Pct(within, n) << ") |\n"
+      << "| on the covered surface: within the band; no STOP in the ramp; true force at the first STOP p5 / p50 / p95 | "
+      << covered_within << " of " << covered << " (" << Pct(covered_within, covered) << "); " << covered_never << "; "
+      << Fmt(Quantile(covered_forces, 0.05), "%.3f") << " / " << Fmt(Quantile(covered_forces, 0.5), "%.3f") << " / "
+      << Fmt(Quantile(covered_forces, 0.95), "%.3f") << " N |\n"
       << "| first STOP below the band (early) / above it in the ramp (late) / only in the release / none | " << early
       << " / " << late << " / " << in_release << " / " << never << " |\n"
       << "| first STOP by cause: force above the threshold / over range / doubt / fault | " << by_cause[1] << " / "
@@ -987,14 +1027,15 @@ std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const Targe
   if (!failing.empty()) {
     rep << "Points outside the band (" << failing.size() << "):\n\n"
         << "| Y mm | R deg | true force at the first STOP, N | cause | largest force sent in the ramp, N | decoded "
-           "force at the true threshold (+-" << Fmt(100 * kNearThreshold, "%.0f") << " %), mean +- sd, N |\n"
-        << "| --- | --- | --- | --- | --- | --- |\n";
+           "force at the true threshold (+-" << Fmt(100 * kNearThreshold, "%.0f") << " %), mean +- sd, N | accepted band |\n"
+        << "| --- | --- | --- | --- | --- | --- | --- |\n";
     for (std::size_t k : failing) {
       const SlowPoint& p = res[k];
       rep << "| " << Fmt(g.y(k), "%.0f") << " | " << Fmt(g.r(k), "%.0f") << " | "
           << (p.cause == StopCause::kNone ? "no STOP" : p.in_release ? "only in the release" : Fmt(p.true_force_n, "%.3f"))
           << " | " << kStopCauseName[static_cast<std::size_t>(p.cause)] << " | " << Fmt(p.max_force_n) << " | "
-          << (std::isfinite(p.near_mean_n) ? Fmt(p.near_mean_n) + " +- " + Fmt(p.near_sd_n) : "no contact") << " |\n";
+          << (std::isfinite(p.near_mean_n) ? Fmt(p.near_mean_n) + " +- " + Fmt(p.near_sd_n) : "no contact") << " | "
+          << bands.Name(g.y(k), g.r(k)) << " |\n";
     }
     rep << "\n";
   }
@@ -1059,8 +1100,20 @@ void RunTargets(const TargetsArgs& a, const std::string& command) {
       << "Each point is one stream through the decoder service's whole path without sockets: the twin, the "
       << "interrogator simulation, Hyperion bytes, the ingest codec, link::Monitor over the default pipeline "
       << "(paper-float). Seeds are held out: training used 1, calibration 2 and field 10, test 3 and field 4.\n\n";
-  if (a.target != "slow") rep << RunLight(put, rule, a, base);
-  if (a.target != "light") rep << RunSlow(put, rule, a, base);
+  Bands bands;
+  for (const auto& b : safety.coverage.accepted_uncovered) {
+    if (b.patch.empty() || b.patch == put.name()) bands.bands.push_back(b);
+  }
+  rep << "The covered surface: the grid points outside the scene's " << bands.bands.size()
+      << " accepted uncovered bands on this patch (safety.coverage.accepted_uncovered";
+  for (std::size_t i = 0; i < bands.bands.size(); ++i) {
+    const auto& b = bands.bands[i];
+    rep << (i == 0 ? ": " : ", ") << b.name << " Y " << Fmt(b.y_min_mm, "%g") << ".." << Fmt(b.y_max_mm, "%g") << " R "
+        << Fmt(b.r_min_deg, "%g") << ".." << Fmt(b.r_max_deg, "%g");
+  }
+  rep << "), where the scene admits its threshold is not guaranteed.\n\n";
+  if (a.target != "slow") rep << RunLight(put, rule, bands, a, base);
+  if (a.target != "light") rep << RunSlow(put, rule, bands, a, base);
   std::printf("%s", rep.str().c_str());
   if (!base.empty()) {
     std::ofstream(base + ".md") << rep.str();
