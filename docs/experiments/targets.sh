@@ -4,7 +4,7 @@
 # (build/release/bin/hard_press_grid, forces 5..200 N). Run from the repository root after
 # `cmake --workflow --preset release` (hard_press_grid is a test executable of tests/decode).
 # Usage: docs/experiments/targets.sh [BUILD_BIN_DIR] [OUT_DIR]
-#   (about 35 min on 2 busy cores; the presses are deterministic, the thread count does not change them)
+#   (about 15 min on 2 busy cores; the presses are deterministic, the thread count does not change them)
 set -euo pipefail
 bin=${1:-build/release/bin}
 out=${2:-docs/experiments/targets}
