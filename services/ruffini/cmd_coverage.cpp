@@ -28,6 +28,7 @@
 #include "ruffini/link/monitor.h"
 #include "ruffini/plot/svg.h"
 #include "ruffini/safety/scene.h"
+#include "ruffini/scene_file.h"
 #include "ruffini/sim/scenario.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
@@ -1074,7 +1075,12 @@ void RunTargets(const TargetsArgs& a, const std::string& command) {
     throw InputError("--target must be light, slow or both (got '" + a.target + "')");
   }
   const PatchUnderTest put(a.scene, a.patch, a.model);
-  const safety::Config safety = safety::ConfigFromScene(a.scene);
+  // The scene's safety section (thresholds, input limits, accepted bands); a scene without one needs
+  // --level-n and is judged with the default input limits, no band accepted.
+  const SceneFile file = LoadSceneFile(a.scene);
+  safety::Config safety;
+  if (file.safety) safety = safety::ConfigFromScene(file);
+  else if (!(a.level_n > 0)) throw InputError(a.scene + " has no safety section: give --level-n");
   StopRule rule;
   rule.input = safety.input;
   rule.extent_y_mm = put.spec().extent_y_mm;

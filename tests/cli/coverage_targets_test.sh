@@ -4,7 +4,8 @@
 # - presses of 5 N in the interior (30 mm from every edge, where the sensitivity map needs at most 2.25 N)
 #   always stop: no point clean, every press stops, the causes add up to the presses; every slow press to 3 N
 #   there stops during its ramp, and the report's counts add up to the points;
-# - the report and its figures are written (each figure's title names the patch).
+# - the report and its figures are written (each figure's title names the patch);
+# - bad input (a scene without thresholds and no --level-n, a slow press that cannot leave the band) is refused.
 # Usage: coverage_targets_test.sh RUFFINI SCENE WORK
 set -u
 ruffini=$1; scene=$2; work=$3
@@ -53,6 +54,12 @@ w=$(awk '{print $1}' <<<"$within")
 [ "$(tr -d ' ' <<<"$slow_causes" | awk -F/ '{print $1 + $2 + $3 + $4}')" = "$slow_pts" ]; check "slow: the causes add up" $?
 grep -Eq '\| true force at the first STOP, p5 / p50 / p95 \(the '"$slow_pts"' points stopped in the ramp\) \| [0-9.]+ / [0-9.]+ / [0-9.]+ N' "$work/hard.md"
 check "slow: the distribution over every point" $?
+
+# Bad input: a clear error, no report.
+out=$("$ruffini" coverage-targets --scene "$(dirname "$scene")/forearm.yaml" --target light 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q 'forearm.yaml has no safety section: give --level-n' <<<"$out"; check "a scene without thresholds needs --level-n" $?
+out=$("$ruffini" coverage-targets --scene "$scene" --target slow --slow-top-n 1.6 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "slow-top-n (1.60 N) must lie above the band's top (1.72 N)" <<<"$out"; check "a slow press that cannot leave the band is refused" $?
 
 for f in upper_arm_a.md upper_arm_a-light.svg upper_arm_a-slow.svg upper_arm_a-slow-sorted.svg; do
   [ -s "$work/report/$f" ]; check "report: $f written" $?
