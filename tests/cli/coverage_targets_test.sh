@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# `ruffini coverage-targets` (docs/coverage.md, "Targets") on coarse grids of the cobot scene's upper_arm_a:
+# - presses of 0 N never stop: every point clean, 0 presses stop, nothing stops in the untouched starts;
+# - presses of 5 N in the interior (30 mm from every edge, where the sensitivity map needs at most 2.25 N)
+#   always stop: no point clean, every press stops, the causes add up to the presses; every slow press to 3 N
+#   there stops during its ramp, and the report's counts add up to the points;
+# - the report and its figures are written (each figure's title names the patch);
+# - bad input (a scene without thresholds and no --level-n, a slow press that cannot leave the band) is refused.
+# Usage: coverage_targets_test.sh RUFFINI SCENE WORK
+set -u
+ruffini=$1; scene=$2; work=$3
+rm -rf "$work"; mkdir -p "$work"
+fail=0
+check() {  # NAME CONDITION-RESULT (0 ok)
+  if [ "$2" -ne 0 ]; then echo "FAIL: $1"; fail=1; else echo "ok: $1"; fi
+}
+# A row "| LABEL | VALUE |" of the report: VALUE.
+row() { grep -F "| $1" "$2" | head -1 | awk -F'|' '{print $3}'; }
+
+"$ruffini" coverage-targets --scene "$scene" --patch upper_arm_a --target light --force-n 0 --step-mm 40 --presses 2 \
+  --threads 2 >"$work/zero.md" 2>"$work/zero.err" || { echo "FAIL: zero-force run"; cat "$work/zero.err"; exit 1; }
+pts=$(grep -o 'At each of [0-9]* grid points' "$work/zero.md" | awk '{print $4}')
+clean=$(row "points with no STOP in any press" "$work/zero.md")
+stops=$(row "presses that STOP" "$work/zero.md")
+start=$(row "points with a STOP in the untouched start" "$work/zero.md")
+echo "zero force: $pts points; clean: $clean; stops: $stops; start: $start"
+[ -n "$pts" ] && [ "$pts" -gt 0 ]; check "zero force: a grid" $?
+[ "$(awk '{print $1, $3}' <<<"$clean")" = "$pts $pts" ]; check "zero force: every point clean" $?
+[ "$(awk '{print $1, $3}' <<<"$stops")" = "0 $((pts * 2))" ]; check "zero force: no press stops" $?
+[ "$(tr -d ' ' <<<"$start")" = "0" ]; check "zero force: nothing stops in the starts" $?
+
+"$ruffini" coverage-targets --scene "$scene" --patch upper_arm_a --force-n 5 --edge-mm 30 --step-mm 30 \
+  --slow-step-mm 30 --presses 2 --threads 2 --report "$work/report" >"$work/hard.md" 2>"$work/hard.err" \
+  || { echo "FAIL: interior run"; cat "$work/hard.err"; exit 1; }
+pts=$(grep -o 'At each of [0-9]* grid points' "$work/hard.md" | head -1 | awk '{print $4}')
+clean=$(row "points with no STOP in any press" "$work/hard.md")
+stops=$(row "presses that STOP" "$work/hard.md")
+causes=$(row "of them by cause" "$work/hard.md")
+echo "5 N interior: $pts points; clean: $clean; stops: $stops; causes: $causes"
+[ -n "$pts" ] && [ "$pts" -gt 0 ]; check "5 N: a grid" $?
+[ "$(awk '{print $1}' <<<"$clean")" = "0" ]; check "5 N interior: no point clean" $?
+[ "$(awk '{print $1, $3}' <<<"$stops")" = "$((pts * 2)) $((pts * 2))" ]; check "5 N interior: every press stops" $?
+[ "$(tr -d ' ' <<<"$causes" | awk -F/ '{print $1 + $2 + $3 + $4}')" = "$((pts * 2))" ]; check "5 N interior: the causes add up" $?
+
+slow_pts=$(grep -o 'At each of [0-9]* grid points' "$work/hard.md" | sed -n 2p | awk '{print $4}')
+within=$(row "points whose first STOP is within the band" "$work/hard.md")
+split=$(row "first STOP below the band" "$work/hard.md")
+slow_causes=$(row "first STOP by cause" "$work/hard.md")
+echo "slow interior: $slow_pts points; within: $within; early/late/release/none: $split; causes: $slow_causes"
+[ -n "$slow_pts" ] && [ "$slow_pts" -gt 0 ]; check "slow: a grid" $?
+w=$(awk '{print $1}' <<<"$within")
+[ "$(tr -d ' ' <<<"$split" | awk -F/ -v w="$w" '{print w + $1 + $2 + $3 + $4}')" = "$slow_pts" ]; check "slow: the counts add up" $?
+[ "$(tr -d ' ' <<<"$split" | awk -F/ '{print $3 + $4}')" = "0" ]; check "slow interior: every press stops in its ramp" $?
+[ "$(tr -d ' ' <<<"$slow_causes" | awk -F/ '{print $1 + $2 + $3 + $4}')" = "$slow_pts" ]; check "slow: the causes add up" $?
+grep -Eq '\| true force at the first STOP, p5 / p50 / p95 \(the '"$slow_pts"' points stopped in the ramp\) \| [0-9.]+ / [0-9.]+ / [0-9.]+ N' "$work/hard.md"
+check "slow: the distribution over every point" $?
+
+# Bad input: a clear error, no report.
+out=$("$ruffini" coverage-targets --scene "$(dirname "$scene")/forearm.yaml" --target light 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q 'forearm.yaml has no safety section: give --level-n' <<<"$out"; check "a scene without thresholds needs --level-n" $?
+out=$("$ruffini" coverage-targets --scene "$scene" --target slow --slow-top-n 1.6 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "slow-top-n (1.60 N) must lie above the band's top (1.72 N)" <<<"$out"; check "a slow press that cannot leave the band is refused" $?
+
+for f in upper_arm_a.md upper_arm_a-light.svg upper_arm_a-slow.svg upper_arm_a-slow-sorted.svg; do
+  [ -s "$work/report/$f" ]; check "report: $f written" $?
+done
+for f in light slow slow-sorted; do
+  grep -q '^<svg ' "$work/report/upper_arm_a-$f.svg"; check "report: upper_arm_a-$f.svg is an SVG" $?
+done
+grep -q '>upper_arm_a: presses of 5.00 N that STOP' "$work/report/upper_arm_a-light.svg"; check "light figure titled" $?
+grep -q '>upper_arm_a: slow press' "$work/report/upper_arm_a-slow.svg"; check "slow figure titled" $?
+cmp -s "$work/hard.md" "$work/report/upper_arm_a.md"; check "the report file is what was printed" $?
+exit $fail
