@@ -309,12 +309,34 @@ void RegisterDecode(CLI::App& app) {
   });
 }
 
+void RegisterUncertainty(CLI::App& app) {
+  struct Args {
+    std::string model, data, patch_spec = RUFFINI_DEFAULT_PATCH;
+  };
+  auto a = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "uncertainty",
+      "Where a model's calibrated uncertainty is honest: decode a recording as one stream and print the share of frames "
+      "within 1 / 2 / 3 sigma by predicted force, press phase, true position and reported covariance size");
+  cmd->add_option("--model", a->model, "Model file (.rmodel) with a calibrated uncertainty")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--data", a->data, "Dataset (.h5) with true positions (a twin run)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
+  cmd->callback([a]() {
+    const ModelAndData md = LoadModelAndData(a->model, a->data, a->patch_spec);
+    if (!md.model.has_uncertainty()) throw InputError(a->model + ": the model has no calibrated uncertainty (run `ruffini calibrate`)");
+    const eval::StreamPredictions sp = DecodeWithProgress(md.model, md.spec, md.data, "decoding frames");
+    std::printf("%s on %s (every frame of the stream; position: located frames above 50 mN)\n\n%s", a->model.c_str(),
+                a->data.c_str(), eval::CoverageTable(eval::CoverageBreakdown(md.data, sp, md.spec)).c_str());
+  });
+}
+
 void RegisterCalibrate(CLI::App& app) {
   struct Args {
     std::string model, data, out, creep_data, patch_spec = RUFFINI_DEFAULT_PATCH;
     int indentations = 100;
     bool gains = true;
     bool creep = true;
+    bool uncertainty_only = false;
     int sweeps = 3;
   };
   auto a = std::make_shared<Args>();
@@ -334,9 +356,13 @@ void RegisterCalibrate(CLI::App& app) {
       ->check(CLI::ExistingFile);
   cmd->add_flag("--creep,!--no-creep", a->creep, "With --field-data: also fit the creep compensation")->capture_default_str();
   cmd->add_option("--sweeps", a->sweeps, "Coordinate sweeps of the gain fit")->check(CLI::Range(1, 20))->capture_default_str();
+  cmd->add_flag("--uncertainty-only", a->uncertainty_only,
+                "Refit only the calibrated uncertainty: networks, gains, input range, thermal ratios, creep, sensitivity and "
+                "response maps stay as they are in --model");
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
     const auto t0 = std::chrono::steady_clock::now();
+    if (a->uncertainty_only && !a->creep_data.empty()) throw InputError("--uncertainty-only takes no --field-data (it fits nothing else)");
     ModelAndData md = LoadModelAndData(a->model, a->data, a->patch_spec);
     const dataset::Dataset cal = eval::FirstIndentations(md.data, a->indentations);
     std::set<std::int32_t> ids(cal.indentation.begin(), cal.indentation.end());
@@ -348,6 +374,22 @@ void RegisterCalibrate(CLI::App& app) {
     }
     spdlog::info("calibrating on {} frames, {} indentations", cal.size(), ids.size());
     v1::DecoderModel m = md.model;
+    const auto print_uncertainty = [](const v1::Uncertainty& u) {
+      std::printf("uncertainty on the calibration data: force within 1/2 sd %.1f / %.1f %%, position %.1f / %.1f %% "
+                  "(3 sigma: force %.1f %%, position %.1f %%; position floor %.2f mm^2)\n",
+                  100.0 * u.force_within_1sd(), 100.0 * u.force_within_2sd(), 100.0 * u.position_within_1sd(),
+                  100.0 * u.position_within_2sd(), 100.0 * u.force_within_3sd(), 100.0 * u.position_within_3sd(),
+                  u.position_floor_mm2());
+    };
+    if (a->uncertainty_only) {
+      *m.mutable_uncertainty() = eval::FitUncertainty(m, md.spec, cal);
+      decode::ValidateModel(m, a->out);
+      decode::SaveModel(a->out, m);
+      print_uncertainty(m.uncertainty());
+      std::printf("wrote %s (uncertainty only, %.0f s)\n", a->out.c_str(),
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      return;
+    }
     if (a->gains) {
       const eval::GainFit g = eval::FitGains(m, md.spec, cal, a->sweeps, [](int s, int n, double obj) {
         spdlog::info("gain fit: sweep {}/{}, objective {:.2f}", s, n, obj);
@@ -392,10 +434,7 @@ void RegisterCalibrate(CLI::App& app) {
     cc->set_seconds(seconds);
     decode::ValidateModel(m, a->out);
     decode::SaveModel(a->out, m);
-    const auto& u = m.uncertainty();
-    std::printf("uncertainty on the calibration data: force within 1/2 sd %.1f / %.1f %%, position %.1f / %.1f %%\n",
-                100.0 * u.force_within_1sd(), 100.0 * u.force_within_2sd(), 100.0 * u.position_within_1sd(),
-                100.0 * u.position_within_2sd());
+    print_uncertainty(m.uncertainty());
     std::printf("wrote %s (%.0f s)\n", a->out.c_str(), seconds);
   });
 }
@@ -448,6 +487,7 @@ void RegisterDecodeCommands(CLI::App& app) {
   RegisterEvaluate(app);
   RegisterDecode(app);
   RegisterCalibrate(app);
+  RegisterUncertainty(app);
 }
 
 }  // namespace ruffini::cli

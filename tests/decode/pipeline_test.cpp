@@ -13,6 +13,7 @@
 #include <tuple>
 #include <vector>
 
+#include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
 #include "ruffini/patch/spec_loader.h"
 #include "synthetic_model.h"
@@ -317,6 +318,42 @@ TEST(PipelineTest, UncertaintyIsTheModelsCalibration) {
   EXPECT_FALSE(g.pipe.calibrated_uncertainty());
   const auto n = g.Press(500.0f);
   EXPECT_TRUE(std::isnan(n.force_sd_n) && std::isnan(n.cov_yy_mm2));
+}
+
+TEST(PipelineTest, AnUncertaintyWithoutTheThreeSigmaFieldsLoadsAndDecodesAsBefore) {
+  // A model file written before force_within_3sd / position_within_3sd existed: it parses, validates, keeps its
+  // bytes, and decodes exactly as one that carries them (they are measurements, not inputs of the runtime).
+  auto old = testing::SyntheticModel(Spec());
+  auto* u = old.mutable_uncertainty();
+  for (auto [knot, sd, scale] : {std::tuple{0.1f, 0.02f, 2.0f}, {1.0f, 0.1f, 4.0f}}) {
+    u->add_force_knots_n(knot);
+    u->add_force_sd_n(sd);
+    u->add_position_scale(scale);
+  }
+  u->set_position_floor_mm2(0.25f);
+  u->set_force_within_1sd(0.7f);
+  u->set_position_within_2sd(0.9f);
+  const std::string bytes = old.SerializeAsString();
+  v1::DecoderModel loaded;
+  ASSERT_TRUE(loaded.ParseFromString(bytes));
+  EXPECT_EQ(loaded.uncertainty().force_within_3sd(), 0.0f);
+  EXPECT_EQ(loaded.uncertainty().position_within_3sd(), 0.0f);
+  EXPECT_EQ(loaded.SerializeAsString(), bytes);
+  EXPECT_NO_THROW(ValidateModel(loaded, "old"));
+  auto now = loaded;
+  now.mutable_uncertainty()->set_force_within_3sd(0.99f);
+  now.mutable_uncertainty()->set_position_within_3sd(0.98f);
+  Fixture a(loaded), b(now);
+  for (float pm : {55.0f, 300.0f, 700.0f, 1100.0f}) {
+    const auto x = a.Press(pm), y = b.Press(pm);
+    EXPECT_EQ(x.force_sd_n, y.force_sd_n);
+    EXPECT_EQ(x.located, y.located);
+    if (x.located) {
+      EXPECT_EQ(x.cov_yy_mm2, y.cov_yy_mm2);
+      EXPECT_EQ(x.cov_yr_mm2, y.cov_yr_mm2);
+      EXPECT_EQ(x.cov_rr_mm2, y.cov_rr_mm2);
+    }
+  }
 }
 
 TEST(PipelineTest, ALongGapRestartsTheWindow) {

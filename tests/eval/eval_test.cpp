@@ -170,6 +170,8 @@ TEST(ScoreStreamTest, MissesScoreAsFailuresAndFalseContactsCount) {
   // Coverage: every in-contact frame is exact, sd 10 mN: 100 % within 1 sd (the 20 false contacts err by 0).
   EXPECT_DOUBLE_EQ(m.force_within_1sd, 1.0);
   EXPECT_DOUBLE_EQ(m.position_within_1sd, 1.0);
+  EXPECT_DOUBLE_EQ(m.force_within_3sd, 1.0);
+  EXPECT_DOUBLE_EQ(m.position_within_3sd, 1.0);
   // The longest freeze (97 frames an indentation) against the longest press (98 frames > 20 mN).
   EXPECT_NEAR(m.longest_frozen_s, 0.97, 1e-9);
   EXPECT_NEAR(m.longest_press_s, 0.98, 1e-9);
@@ -235,6 +237,52 @@ TEST(ScoreStreamTest, PressesNearAnEdgeAreScoredApart) {
   const std::string table = EdgeZoneTable({{"constructed", &m}});
   EXPECT_NE(table.find("within 10 mm of an edge"), std::string::npos);
   EXPECT_NE(table.find("| constructed | interior | 194 |"), std::string::npos) << table;
+}
+
+// CoverageBreakdown splits the coverage by where the frames are: a press 2 mm inside the indented area's border
+// (Y 17, the area starts at 15) placed 3 mm inward (Mahalanobis^2 9: outside 2 sigma, inside 3) and one at the
+// centre placed exactly.
+TEST(CoverageBreakdownTest, GroupsByTruePositionReportedPositionAndPhase) {
+  dataset::Dataset d;
+  d.info.sample_rate_hz = 100.0;
+  auto add = [&](float f, float y, float r, int id) { AppendFrame(d, f, y, r, id); };
+  for (int k = 0; k < 50; ++k) add(0.0f, NAN, NAN, -1);
+  const std::array<patch::SurfacePoint, 2> at = {{{17.0, 72.5}, {75.0, 72.5}}};
+  for (int i = 0; i < 2; ++i) {
+    for (int k = 0; k < 100; ++k) add(0.02f * static_cast<float>(k), static_cast<float>(at[i].y_mm), static_cast<float>(at[i].r_deg), i);
+  }
+  StreamPredictions p = PerfectStream(d);
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    if (d.indentation[k] == 0 && p.located[k]) p.y_mm[k] += 3.0f;
+  }
+  const auto rows = CoverageBreakdown(d, p, Spec());
+  const auto row = [&rows](const std::string& g) {
+    for (const auto& r : rows) {
+      if (r.group == g) return r;
+    }
+    ADD_FAILURE() << "no group " << g;
+    return CoverageRow{};
+  };
+  const CoverageRow all = row("all"), edge = row("true position: indented area, < 5 mm from its border"),
+                    inner = row("true position: indented area, >= 5 mm inside"),
+                    reported_inner = row("reported position: indented area, >= 5 mm inside"),
+                    hold = row("hold (>= 90 % of the peak)"), onset = row("onset (before 90 % of the peak)");
+  EXPECT_EQ(all.position_frames, 2u * 97u);  // above 50 mN: 0.06 .. 1.98 N
+  EXPECT_EQ(edge.position_frames, 97u);
+  EXPECT_DOUBLE_EQ(edge.position[0], 0.0);
+  EXPECT_DOUBLE_EQ(edge.position[1], 0.0);
+  EXPECT_DOUBLE_EQ(edge.position[2], 1.0);
+  EXPECT_DOUBLE_EQ(edge.y_within_1sd, 0.0);
+  EXPECT_DOUBLE_EQ(edge.arc_within_1sd, 1.0);
+  EXPECT_DOUBLE_EQ(inner.position[0], 1.0);
+  EXPECT_EQ(reported_inner.position_frames, 2u * 97u);  // placed at Y 20: 5 mm inside
+  EXPECT_DOUBLE_EQ(reported_inner.position[1], 0.5);
+  EXPECT_EQ(hold.position_frames, 2u * 10u);  // 1.80 .. 1.98 N: at least 90 % of the 1.98 N peak
+  EXPECT_EQ(onset.position_frames, 2u * 87u);
+  EXPECT_DOUBLE_EQ(all.force[0], 1.0);
+  EXPECT_NE(CoverageTable(rows).find("| hold (>= 90 % of the peak) | 20 | 100.0 / 100.0 / 100.0 % | 20 | 50.0 / 50.0 / 100.0 % |"),
+            std::string::npos)
+      << CoverageTable(rows);
 }
 
 TEST(EvaluateTest, PredictionsFileIsAligned) {

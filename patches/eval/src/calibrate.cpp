@@ -19,7 +19,8 @@ namespace ruffini::eval {
 namespace {
 
 constexpr double kChi2Sigma1 = 2.2957, kChi2Sigma2 = 6.1801;
-constexpr double kOneSigma = 0.682689;
+constexpr double kOneSigma = 0.682689, kTwoSigma = 0.954500;
+constexpr double kMinFloorMm2 = 0.25;  // (0.5 mm)^2: a fine cell's centre is never exact
 
 double Reference(const dataset::Dataset& d, std::size_t k) {
   return std::isfinite(d.true_force_n[k]) ? d.true_force_n[k] : d.force_n[k];
@@ -104,7 +105,7 @@ v1::InputRange FitInputRange(const v1::DecoderModel& m, const patch::PatchSpec& 
   return r;
 }
 
-v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
+UncertaintyRows CollectUncertaintyRows(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
   // Decode with unit scales so the pipeline hands out the NIP's raw covariance.
   v1::DecoderModel m = model;
   m.clear_input_range();
@@ -116,39 +117,90 @@ v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::Patch
   const decode::Pipeline<float> pipe(m, spec, OpenConfig(m, d));
   const StreamPredictions p = DecodeStream(pipe, d);
   const patch::Geometry geo(spec.surface_radius_mm);
-
-  struct ForceRow { double pred, err; };
-  struct PosRow { double pred, dy, da, cyy, cya, caa; };
-  std::vector<ForceRow> fr;
-  std::vector<PosRow> pr;
+  UncertaintyRows rows;
   for (std::size_t k = 0; k < d.size(); ++k) {
     const double ref = Reference(d, k);
     if (!p.valid[k] || !p.in_contact[k] || !std::isfinite(ref)) continue;
-    fr.push_back({p.force_n[k], std::abs(p.force_n[k] - ref)});
+    rows.force.push_back({p.force_n[k], std::abs(p.force_n[k] - ref)});
     if (p.located[k] && ref > 0.05 && std::isfinite(d.y_mm[k])) {
-      pr.push_back({p.force_n[k], p.y_mm[k] - d.y_mm[k], geo.ArcMm(p.r_deg[k] - d.r_deg[k]), p.pos_cov_mm2[3 * k],
-                    p.pos_cov_mm2[3 * k + 1], p.pos_cov_mm2[3 * k + 2]});
+      rows.position.push_back({p.force_n[k], p.y_mm[k] - d.y_mm[k], geo.ArcMm(p.r_deg[k] - d.r_deg[k]), p.pos_cov_mm2[3 * k],
+                               p.pos_cov_mm2[3 * k + 1], p.pos_cov_mm2[3 * k + 2]});
     }
   }
+  return rows;
+}
+
+namespace {
+
+// Both coverage levels are fitted, each against its band (issue 17: 68 +- 5 % within 1 sigma, 95 +- 3 % within
+// 2): a scale s is scored by the larger of |coverage_1(s) - 68.27 %| / 5 % and |coverage_2(s) - 95.45 %| / 3 %.
+// Both coverages grow with s, so between the scale that meets the 1-sigma level exactly and the one that meets
+// the 2-sigma level exactly the two deviations have opposite signs, and the best scale is where the band-scaled
+// deviations cancel: a bisection. With normal errors both scales coincide (the old 1-sigma fit); with heavy
+// tails the fit widens until the 2-sigma share is as far inside its band as the 1-sigma share is inside its own,
+// and, when the tails are too heavy for both bands, at least until the 2-sigma share reaches its band (92.45 %).
+constexpr double kBand1 = 0.05, kBand2 = 0.03;
+
+// Scale in [lo, hi] (log bisection) at which f(scale) crosses 0; f is non-decreasing.
+template <typename F>
+double Crossing(const F& f, double lo, double hi) {
+  for (int it = 0; it < 50; ++it) {
+    const double mid = std::sqrt(lo * hi);
+    (f(mid) < 0 ? lo : hi) = mid;
+  }
+  return std::sqrt(lo * hi);
+}
+
+// cover(s, level) = share within level sigma at scale s (non-decreasing in s).
+template <typename Cover>
+double BalancedScale(const Cover& cover, double lo, double hi) {
+  const double s1 = Crossing([&](double s) { return cover(s, 1) - kOneSigma; }, lo, hi);
+  const double s2 = Crossing([&](double s) { return cover(s, 2) - kTwoSigma; }, lo, hi);
+  if (!(std::abs(std::log(s1 / s2)) > 1e-9)) return s1;
+  const double balanced = Crossing(
+      [&](double s) { return (cover(s, 1) - kOneSigma) / kBand1 + (cover(s, 2) - kTwoSigma) / kBand2; }, std::min(s1, s2),
+      std::max(s1, s2));
+  // Never below the 2-sigma band: too narrow is the unsafe side (a confident wrong place), too wide only costs
+  // 1-sigma share above its band.
+  const double floor2 = Crossing([&](double s) { return cover(s, 2) - (kTwoSigma - kBand2); }, lo, hi);
+  return std::max(balanced, floor2);
+}
+
+// How far the coverage lies outside the middle of the bands (1 = at a band's edge).
+double BandCost(double c1, double c2) { return std::max(std::abs(c1 - kOneSigma) / kBand1, std::abs(c2 - kTwoSigma) / kBand2); }
+
+double Mahalanobis2(const UncertaintyRows::Position& r, double k, double floor) {
+  const double yy = k * r.cyy + floor, ya = k * r.cya, aa = k * r.caa + floor;
+  const double det = yy * aa - ya * ya;
+  return (aa * r.dy * r.dy - 2 * ya * r.dy * r.da + yy * r.da * r.da) / det;
+}
+
+}  // namespace
+
+v1::Uncertainty FitUncertaintyRows(const UncertaintyRows& rows) {
+  const auto& fr = rows.force;
+  const auto& pr = rows.position;
   if (fr.size() < 200 || pr.size() < 200) {
     throw InputError("uncertainty: too few in-contact frames to fit (" + std::to_string(fr.size()) + " force, " +
                      std::to_string(pr.size()) + " located); calibrate on more indentations");
   }
-  constexpr float kFloorMm2 = 0.25f;  // (0.5 mm)^2: a fine cell's centre is never exact
-  const auto d2 = [](const PosRow& r, double k, double floor) {
-    const double yy = k * r.cyy + floor, ya = k * r.cya, aa = k * r.caa + floor;
-    const double det = yy * aa - ya * ya;
-    return (aa * r.dy * r.dy - 2 * ya * r.dy * r.da + yy * r.da * r.da) / det;
-  };
-  // Bins of predicted force with at least min_rows frames each (force and position alike).
+  // Bins of predicted force with at least kMinRows frames each (force and position alike).
   const std::vector<double> edges = {0.0, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 1e9};
-  v1::Uncertainty u;
   constexpr std::size_t kMinRows = 100;
+  // Position rows per bin: at most kMaxRows, an even stride through the bin (the floor search decodes nothing
+  // but scores every bin once per floor and bisection step).
+  constexpr std::size_t kMaxRows = 20000;
+  struct Bin {
+    double knot = 0, sd = 0;
+    std::vector<const UncertaintyRows::Position*> rows;
+    std::size_t all_rows = 0;
+  };
+  std::vector<Bin> bins;
   double lo = edges.front();
   for (std::size_t b = 1; b < edges.size(); ++b) {
     const double hi = edges[b];
     std::vector<double> errs, preds;
-    std::vector<const PosRow*> rows;
+    std::vector<const UncertaintyRows::Position*> prow;
     for (const auto& r : fr) {
       if (r.pred >= lo && r.pred < hi) {
         errs.push_back(r.err);
@@ -156,31 +208,73 @@ v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::Patch
       }
     }
     for (const auto& r : pr) {
-      if (r.pred >= lo && r.pred < hi) rows.push_back(&r);
+      if (r.pred >= lo && r.pred < hi) prow.push_back(&r);
     }
     const bool last = b + 1 == edges.size();
-    if ((errs.size() < kMinRows || rows.size() < kMinRows) && !last) continue;  // widen the bin
-    if (errs.size() < kMinRows || rows.size() < kMinRows) {
-      if (u.force_knots_n_size() > 0) break;  // the tail is too thin: the last knot holds beyond it
+    if ((errs.size() < kMinRows || prow.size() < kMinRows) && !last) continue;  // widen the bin
+    if (errs.size() < kMinRows || prow.size() < kMinRows) {
+      if (!bins.empty()) break;  // the tail is too thin: the last knot holds beyond it
       throw InputError("uncertainty: not enough frames per force bin");
     }
-    const double knot = stats::Median(preds);
-    const double sd = std::max(1e-3, stats::Quantile(errs, kOneSigma));
-    // Position scale: bisection (in log) for the k at which 68.27 % of the bin lies within chi2 2.30.
-    double klo = 1e-4, khi = 1e4;
-    for (int it = 0; it < 60; ++it) {
-      const double k = std::sqrt(klo * khi);
-      std::size_t inside = 0;
-      for (const PosRow* r : rows) inside += d2(*r, k, kFloorMm2) <= kChi2Sigma1;
-      (static_cast<double>(inside) / static_cast<double>(rows.size()) < kOneSigma ? klo : khi) = k;
-    }
-    if (u.force_knots_n_size() > 0 && !(knot > u.force_knots_n(u.force_knots_n_size() - 1))) continue;
-    u.add_force_knots_n(static_cast<float>(knot));
-    u.add_force_sd_n(static_cast<float>(sd));
-    u.add_position_scale(static_cast<float>(std::sqrt(klo * khi)));
+    Bin bin;
+    bin.knot = stats::Median(preds);
+    std::sort(errs.begin(), errs.end());
+    const auto share_within = [&errs](double limit) {
+      return static_cast<double>(std::upper_bound(errs.begin(), errs.end(), limit) - errs.begin()) / static_cast<double>(errs.size());
+    };
+    const double q1 = std::max(1e-4, stats::Quantile(errs, kOneSigma));
+    bin.sd = std::max(1e-3, BalancedScale([&](double s, int level) { return share_within(level * s); }, q1 * 1e-3, q1 * 1e3));
+    if (!bins.empty() && !(bin.knot > bins.back().knot)) continue;  // widen the bin
+    bin.all_rows = prow.size();
+    const std::size_t stride = (prow.size() + kMaxRows - 1) / kMaxRows;
+    for (std::size_t i = 0; i < prow.size(); i += stride) bin.rows.push_back(prow[i]);
+    bins.push_back(std::move(bin));
     lo = hi;
   }
-  u.set_position_floor_mm2(kFloorMm2);
+  // Position: per bin a scale k of the NIP's covariance, and one floor on the diagonal for all bins. For each
+  // floor (0.25 mm^2 - a fine cell's centre is never exact - up to 16 mm^2), each bin's k is the balanced scale;
+  // the floor kept is the one whose bins end, on average over the frames, nearest the middle of both bands (a
+  // floor widens most the frames whose NIP covariance is smallest: where the NIP is sure of itself but wrong).
+  const auto fit_scales = [&bins](double floor, std::vector<double>& k) {
+    double cost = 0, weight = 0;
+    k.assign(bins.size(), 1.0);
+    for (std::size_t b = 0; b < bins.size(); ++b) {
+      const auto& bin_rows = bins[b].rows;
+      const auto cover = [&](double s, int level) {
+        const double limit = level == 1 ? kChi2Sigma1 : kChi2Sigma2;
+        std::size_t inside = 0;
+        for (const auto* r : bin_rows) inside += Mahalanobis2(*r, s, floor) <= limit;
+        return static_cast<double>(inside) / static_cast<double>(bin_rows.size());
+      };
+      k[b] = BalancedScale(cover, 1e-4, 1e4);
+      cost += BandCost(cover(k[b], 1), cover(k[b], 2)) * static_cast<double>(bins[b].all_rows);
+      weight += static_cast<double>(bins[b].all_rows);
+    }
+    return cost / weight;
+  };
+  double best_floor = kMinFloorMm2, best_cost = std::numeric_limits<double>::infinity();
+  std::vector<double> best_k, k;
+  for (int i = 0; i <= 12; ++i) {
+    const double floor = kMinFloorMm2 * std::pow(2.0, 0.5 * i);
+    const double cost = fit_scales(floor, k);
+    if (cost < best_cost - 0.02) {  // a larger floor only when it brings the bins 2 % of a band nearer
+      best_cost = cost;
+      best_floor = floor;
+      best_k = k;
+    }
+  }
+  v1::Uncertainty u;
+  for (std::size_t b = 0; b < bins.size(); ++b) {
+    u.add_force_knots_n(static_cast<float>(bins[b].knot));
+    u.add_force_sd_n(static_cast<float>(bins[b].sd));
+    u.add_position_scale(static_cast<float>(best_k[b]));
+  }
+  u.set_position_floor_mm2(static_cast<float>(best_floor));
+  return u;
+}
+
+v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
+  v1::Uncertainty u = FitUncertaintyRows(CollectUncertaintyRows(model, spec, d));
   u.set_source(d.info.source);
   // Coverage on the fitting data with the fitted functions (piecewise linear between knots, as the runtime).
   v1::DecoderModel check = model;
@@ -191,9 +285,10 @@ v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::Patch
   const StreamMetrics s = ScoreStream(d, q, spec, {}, {});
   u.set_force_within_1sd(static_cast<float>(s.force_within_1sd));
   u.set_force_within_2sd(static_cast<float>(s.force_within_2sd));
+  u.set_force_within_3sd(static_cast<float>(s.force_within_3sd));
   u.set_position_within_1sd(static_cast<float>(s.position_within_1sd));
   u.set_position_within_2sd(static_cast<float>(s.position_within_2sd));
-  (void)kChi2Sigma2;
+  u.set_position_within_3sd(static_cast<float>(s.position_within_3sd));
   return u;
 }
 

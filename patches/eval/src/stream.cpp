@@ -17,8 +17,8 @@ namespace {
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr double kGateN = 0.05;     // the paper's gate: location is scored above it
 constexpr double kQuietN = 0.02;    // below this true force a reported contact is a false contact
-// chi-square(2) quantiles of the 1- and 2-sigma probabilities (68.27 %, 95.45 %): -2 ln(1 - p).
-constexpr double kChi2Sigma1 = 2.2957, kChi2Sigma2 = 6.1801;
+// chi-square(2) quantiles of the 1-, 2- and 3-sigma probabilities (68.27 %, 95.45 %, 99.73 %): -2 ln(1 - p).
+constexpr double kChi2Sigma1 = 2.2957, kChi2Sigma2 = 6.1801, kChi2Sigma3 = 11.8290;
 
 std::string F(const char* fmt, double v) {
   char b[64];
@@ -115,7 +115,7 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
   std::vector<std::size_t> bin_n(edges.size() - 1), bin_miss(edges.size() - 1), bin_contact(edges.size() - 1);
   std::vector<double> f_all, f_above, f_cell, l_above, l_located;
   std::size_t above100 = 0, missed100 = 0;
-  std::size_t f1 = 0, f2 = 0, p1 = 0, p2 = 0;
+  std::size_t f1 = 0, f2 = 0, f3 = 0, p1 = 0, p2 = 0, p3 = 0;
   struct ZoneData {
     std::vector<double> force, location, located, ratio, location_1n;
   } zone_edge, zone_in;
@@ -152,6 +152,7 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
       const double z = std::abs(pred - ref) / p.force_sd_n[k];
       f1 += z <= 1.0;
       f2 += z <= 2.0;
+      f3 += z <= 3.0;
     }
     if (ref > kGateN && std::isfinite(d.y_mm[k]) && std::isfinite(d.r_deg[k])) {
       f_above.push_back(fe);
@@ -169,6 +170,7 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
           ++m.position_cov_frames;
           p1 += d2 <= kChi2Sigma1;
           p2 += d2 <= kChi2Sigma2;
+          p3 += d2 <= kChi2Sigma3;
         }
       } else {
         le = geo.SurfaceDistanceMm(guess, truth);
@@ -229,6 +231,8 @@ StreamMetrics ScoreStream(const dataset::Dataset& d, const StreamPredictions& p,
   m.force_within_2sd = share(f2, m.force_cov_frames);
   m.position_within_1sd = share(p1, m.position_cov_frames);
   m.position_within_2sd = share(p2, m.position_cov_frames);
+  m.force_within_3sd = share(f3, m.force_cov_frames);
+  m.position_within_3sd = share(p3, m.position_cov_frames);
   for (std::size_t b = 0; b + 1 < edges.size(); ++b) {
     ForceBinRow r;
     r.lo_n = edges[b];
@@ -329,14 +333,143 @@ std::string StreamReportSection(const std::vector<StreamReportRow>& rows, const 
   h << "\n### Per force bin (" << rows.front().label << ", scored frames)\n\n" << ForceBinTable(sm);
   h << "\n### Uncertainty\n\n";
   if (u != nullptr) {
-    h << "Calibrated on `" << u->source() << "`. Share of in-contact frames whose force error is within 1 / 2 sd (target 68 +- 5 % / 95 +- 3 %): "
-      << pct(sm.force_within_1sd) << " / " << pct(sm.force_within_2sd) << " (" << sm.force_cov_frames
-      << " frames); located frames above 50 mN whose position lies inside the 1 / 2 sigma ellipse (chi-square(2) 2.30 / 6.18): "
-      << pct(sm.position_within_1sd) << " / " << pct(sm.position_within_2sd) << " (" << sm.position_cov_frames << " frames).\n";
+    h << "Calibrated on `" << u->source() << "`. Share of in-contact frames whose force error is within 1 / 2 / 3 sd (target 68 +- 5 % / 95 +- 3 %; "
+         "a normal error: 99.7 % within 3 sd): "
+      << pct(sm.force_within_1sd) << " / " << pct(sm.force_within_2sd) << " / " << pct(sm.force_within_3sd) << " ("
+      << sm.force_cov_frames
+      << " frames); located frames above 50 mN whose position lies inside the 1 / 2 / 3 sigma ellipse (chi-square(2) 2.30 / 6.18 / "
+         "11.83): "
+      << pct(sm.position_within_1sd) << " / " << pct(sm.position_within_2sd) << " / " << pct(sm.position_within_3sd) << " ("
+      << sm.position_cov_frames << " frames).\n";
   } else {
     h << "The model carries no calibrated uncertainty (run `ruffini calibrate` on validation data).\n";
   }
   h << "\n";
+  return h.str();
+}
+
+std::vector<CoverageRow> CoverageBreakdown(const dataset::Dataset& d, const StreamPredictions& p, const patch::PatchSpec& spec) {
+  struct Count {
+    std::size_t fn = 0, pn = 0, y1 = 0, a1 = 0;
+    std::array<std::size_t, 3> f{}, pc{};
+  };
+  const std::vector<std::string> names = {
+      "all", "predicted force < 0.1 N", "predicted force 0.1-0.35 N", "predicted force 0.35-1 N", "predicted force 1-2.5 N",
+      "predicted force >= 2.5 N", "onset (before 90 % of the peak)", "hold (>= 90 % of the peak)", "release (after it)",
+      "outside indentations", "true position: indented area, >= 5 mm inside", "true position: indented area, < 5 mm from its border",
+      "true position: outside the indented area", "reported position: indented area, >= 5 mm inside",
+      "reported position: indented area, < 5 mm from its border", "reported position: outside the indented area", "reported covariance det^(1/4) < 1 mm", "reported covariance det^(1/4) 1-2 mm",
+      "reported covariance det^(1/4) 2-4 mm", "reported covariance det^(1/4) >= 4 mm"};
+  std::vector<Count> c(names.size());
+  // Each indentation's first and last frame at >= 90 % of its peak reference force.
+  std::vector<double> peak;
+  std::vector<std::size_t> first, last;
+  const auto ref_of = [&d](std::size_t k) { return std::isfinite(d.true_force_n[k]) ? d.true_force_n[k] : d.force_n[k]; };
+  std::int32_t max_id = -1;
+  for (std::size_t k = 0; k < d.size(); ++k) max_id = std::max(max_id, d.indentation[k]);
+  peak.assign(static_cast<std::size_t>(max_id + 1), 0.0);
+  first.assign(peak.size(), d.size());
+  last.assign(peak.size(), 0);
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double ref = ref_of(k);
+    if (d.indentation[k] >= 0 && std::isfinite(ref)) peak[static_cast<std::size_t>(d.indentation[k])] = std::max(peak[static_cast<std::size_t>(d.indentation[k])], ref);
+  }
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double ref = ref_of(k);
+    if (d.indentation[k] < 0 || !std::isfinite(ref)) continue;
+    const auto i = static_cast<std::size_t>(d.indentation[k]);
+    if (ref >= 0.9 * peak[i]) {
+      first[i] = std::min(first[i], k);
+      last[i] = std::max(last[i], k);
+    }
+  }
+  const patch::Geometry geo(spec.surface_radius_mm);
+  const patch::Region& area = spec.indented_area;
+  const double mm_per_deg = geo.ArcMm(1.0);
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double ref = ref_of(k);
+    if (!std::isfinite(ref) || !p.valid[k]) continue;
+    std::array<std::size_t, 6> groups{};
+    std::size_t ng = 0;
+    groups[ng++] = 0;
+    const double pred = p.force_n[k];
+    groups[ng++] = (pred < 0.1 ? 1 : pred < 0.35 ? 2 : pred < 1.0 ? 3 : pred < 2.5 ? 4 : 5);
+    if (d.indentation[k] < 0) {
+      groups[ng++] = 9;
+    } else {
+      const auto i = static_cast<std::size_t>(d.indentation[k]);
+      groups[ng++] = k < first[i] ? 6 : k <= last[i] ? 7 : 8;
+    }
+    const bool has_pos = std::isfinite(d.y_mm[k]) && std::isfinite(d.r_deg[k]);
+    if (has_pos) {
+      const patch::SurfacePoint t{d.y_mm[k], d.r_deg[k]};
+      const double inside = std::min({t.y_mm - area.y_min_mm, area.y_max_mm - t.y_mm, (t.r_deg - area.r_min_deg) * mm_per_deg,
+                                      (area.r_max_deg - t.r_deg) * mm_per_deg});
+      groups[ng++] = inside >= 5.0 ? 10 : inside >= 0.0 ? 11 : 12;
+    }
+    const double cyy = p.pos_cov_mm2[3 * k], cyr = p.pos_cov_mm2[3 * k + 1], crr = p.pos_cov_mm2[3 * k + 2];
+    const double det = cyy * crr - cyr * cyr;
+    const bool pos_ok = p.located[k] && ref > kGateN && has_pos && std::isfinite(det) && det > 0 && cyy > 0;
+    if (pos_ok) {
+      const double size = std::pow(det, 0.25);
+      groups[ng++] = size < 1 ? 16 : size < 2 ? 17 : size < 4 ? 18 : 19;
+      const double inside = std::min({p.y_mm[k] - area.y_min_mm, area.y_max_mm - p.y_mm[k], (p.r_deg[k] - area.r_min_deg) * mm_per_deg,
+                                      (area.r_max_deg - p.r_deg[k]) * mm_per_deg});
+      groups[ng++] = inside >= 5.0 ? 13 : inside >= 0.0 ? 14 : 15;
+    }
+    const bool force_ok = p.in_contact[k] && std::isfinite(p.force_sd_n[k]);
+    const double z = std::abs(pred - ref) / p.force_sd_n[k];
+    double d2 = 0, zy = 0, za = 0;
+    if (pos_ok) {
+      const double dy = p.y_mm[k] - d.y_mm[k], da = geo.ArcMm(p.r_deg[k] - d.r_deg[k]);
+      d2 = (crr * dy * dy - 2 * cyr * dy * da + cyy * da * da) / det;
+      zy = std::abs(dy) / std::sqrt(cyy);
+      za = std::abs(da) / std::sqrt(crr);
+    }
+    for (std::size_t gi = 0; gi < ng; ++gi) {
+      Count& n = c[groups[gi]];
+      if (force_ok) {
+        ++n.fn;
+        for (std::size_t l = 0; l < 3; ++l) n.f[l] += z <= static_cast<double>(l + 1);
+      }
+      if (pos_ok) {
+        ++n.pn;
+        n.pc[0] += d2 <= kChi2Sigma1;
+        n.pc[1] += d2 <= kChi2Sigma2;
+        n.pc[2] += d2 <= kChi2Sigma3;
+        n.y1 += zy <= 1.0;
+        n.a1 += za <= 1.0;
+      }
+    }
+  }
+  std::vector<CoverageRow> out;
+  const auto share = [](std::size_t a, std::size_t b) { return b ? static_cast<double>(a) / static_cast<double>(b) : kNaN; };
+  for (std::size_t g = 0; g < names.size(); ++g) {
+    CoverageRow r;
+    r.group = names[g];
+    r.force_frames = c[g].fn;
+    r.position_frames = c[g].pn;
+    for (std::size_t l = 0; l < 3; ++l) {
+      r.force[l] = share(c[g].f[l], c[g].fn);
+      r.position[l] = share(c[g].pc[l], c[g].pn);
+    }
+    r.y_within_1sd = share(c[g].y1, c[g].pn);
+    r.arc_within_1sd = share(c[g].a1, c[g].pn);
+    out.push_back(r);
+  }
+  return out;
+}
+
+std::string CoverageTable(const std::vector<CoverageRow>& rows) {
+  std::ostringstream h;
+  h << "| frames | force frames | force within 1 / 2 / 3 sd | located frames | position within 1 / 2 / 3 sigma | "
+       "Y / arc alone within 1 sd |\n|---|---|---|---|---|---|\n";
+  const auto pct = [](double v) { return std::isfinite(v) ? F("%.1f", 100.0 * v) : std::string("-"); };
+  for (const auto& r : rows) {
+    h << "| " << r.group << " | " << r.force_frames << " | " << pct(r.force[0]) << " / " << pct(r.force[1]) << " / " << pct(r.force[2])
+      << " % | " << r.position_frames << " | " << pct(r.position[0]) << " / " << pct(r.position[1]) << " / " << pct(r.position[2])
+      << " % | " << pct(r.y_within_1sd) << " / " << pct(r.arc_within_1sd) << " % |\n";
+  }
   return h.str();
 }
 

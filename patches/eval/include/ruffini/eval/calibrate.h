@@ -1,8 +1,9 @@
 #pragma once
 // Fitting what a trained model needs to run in the field, on data it was not trained on:
 // - InputRange: the per-grating shifts the model has been shown to handle (outside it: invalid frames);
-// - Uncertainty: force sd and position-covariance scale as functions of the predicted force, fitted so
-//   68.27 % of frames fall within 1 sigma on the fitting data (2-sigma coverage is measured, not forced);
+// - Uncertainty: force sd and position-covariance scale as functions of the predicted force (and one floor on
+//   the position covariance), fitted so the shares within 1 and 2 sigma on the fitting data both lie as far
+//   inside their bands (68 +- 5 %, 95 +- 3 %) as the errors' tails allow;
 // - cast adaptation: per-grating input gains for another cast of the same design, fitted on at most a
 //   hundred of its indentations and folded into the networks' normalisations (no new weights).
 // Never fit on test data: `ruffini calibrate` takes a validation recording (another seed, or the new cast's
@@ -26,6 +27,27 @@ dataset::Dataset FirstIndentations(const dataset::Dataset& data, int indentation
 v1::InputRange FitInputRange(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data,
                              double margin_fraction = 0.5, double margin_pm = 5.0);
 
+// What the uncertainty fit sees: each in-contact frame's predicted force and |force error|; each located frame
+// above 50 mN its position error (Y, arc mm) and the NIP's raw covariance (mm^2, before any scale or floor).
+struct UncertaintyRows {
+  struct Force {
+    double pred, err;
+  };
+  struct Position {
+    double pred, dy, da, cyy, cya, caa;
+  };
+  std::vector<Force> force;
+  std::vector<Position> position;
+};
+// Decodes the data with unit scales (every frame the nets can take: no input range) and collects the rows.
+UncertaintyRows CollectUncertaintyRows(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data);
+// Per bin of predicted force (>= 100 frames each): the force sd and the position scale, each the scale at which
+// the band-scaled deviations of the 1- and 2-sigma shares from 68.27 % and 95.45 % cancel (both shares grow with
+// the scale, so this is the scale nearest both targets), and never a scale that leaves the 2-sigma share below
+// 92.45 % (when the tails are too heavy for both bands, the 1-sigma share exceeds its band); the position floor (0.25-16 mm^2) is the one whose bins
+// end nearest both targets. Source and measured coverage are left empty. Throws InputError on too few rows.
+v1::Uncertainty FitUncertaintyRows(const UncertaintyRows& rows);
+// CollectUncertaintyRows, FitUncertaintyRows, then the coverage the fitted functions reach on the data.
 v1::Uncertainty FitUncertainty(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data);
 
 struct GainFit {

@@ -78,9 +78,11 @@ struct StreamMetrics {
   std::size_t quiet_frames = 0, false_contacts = 0;       // true force < 20 mN; of them reported in contact
   double false_contact_rate = 0;
   std::vector<ForceBinRow> bins;
-  // Uncertainty: share of in-contact frames with |force error| <= 1 / 2 sd; share of located frames above
-  // 50 mN whose Mahalanobis^2 lies within chi-square(2) 68.27 % / 95.45 % (2.30 / 6.18). NaN: uncalibrated.
+  // Uncertainty: share of in-contact frames with |force error| <= 1 / 2 / 3 sd; share of located frames above
+  // 50 mN whose Mahalanobis^2 lies within chi-square(2) 68.27 % / 95.45 % / 99.73 % (2.30 / 6.18 / 11.83).
+  // NaN: uncalibrated.
   double force_within_1sd = 0, force_within_2sd = 0, position_within_1sd = 0, position_within_2sd = 0;
+  double force_within_3sd = 0, position_within_3sd = 0;
   std::size_t force_cov_frames = 0, position_cov_frames = 0;
   // Baseline: longest frozen stretch and longest press (true force > 20 mN, contiguous), s.
   double longest_frozen_s = 0, longest_press_s = 0;
@@ -116,5 +118,21 @@ struct StreamReportRow {
 // the uncertainty's coverage against its targets (uncertainty = nullptr: the model has none).
 std::string StreamReportSection(const std::vector<StreamReportRow>& rows, const StreamMetrics& whole, bool training_data,
                                 const v1::Uncertainty* uncertainty);
+
+// Where the calibrated uncertainty is honest and where not: coverage at 1 / 2 / 3 sigma (gates as ScoreStream,
+// every frame of the stream) per group of frames: predicted force, the press's phase (onset before the reference
+// force first reaches 90 % of its indentation's peak, hold, release after it last does), the true position
+// (inside the spec's indented area 5 mm or more from its border, within 5 mm of it, outside), the same for the
+// reported position (located frames: what the runtime knows), and the size of the reported covariance
+// (det^(1/4), mm). The shape: the share of position errors within 1 sd along Y and
+// along the arc alone (both 68.27 % when the covariance has the errors' shape).
+struct CoverageRow {
+  std::string group;
+  std::size_t force_frames = 0, position_frames = 0;
+  std::array<double, 3> force{}, position{};  // share within 1, 2, 3 sigma
+  double y_within_1sd = 0, arc_within_1sd = 0;
+};
+std::vector<CoverageRow> CoverageBreakdown(const dataset::Dataset& data, const StreamPredictions& pred, const patch::PatchSpec& spec);
+std::string CoverageTable(const std::vector<CoverageRow>& rows);
 
 }  // namespace ruffini::eval
