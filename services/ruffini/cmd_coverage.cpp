@@ -519,6 +519,8 @@ struct TargetsArgs {
   double slow_step_mm = 10.0, slow_rate_n_per_s = 0.15, slow_top_n = 3.0, band = 0.15;
   unsigned presses = 20, threads = 1;
   std::uint64_t seed = 1100;
+  double sd_k = 0.0;  // with sd_k_set: overrides the scene's safety.stop_rule.sd_k
+  bool sd_k_set = false;
 };
 
 // Why the aggregator would STOP on one message of a decoder, or kNone: its threshold rule
@@ -532,6 +534,7 @@ constexpr std::array<const char*, kStopCauses> kStopCauseName = {"none", "force"
 
 struct StopRule {
   double threshold_n = 0;
+  safety::Config::StopRule stop;  // the scene's stop_rule (force + sd_k x sd, safety::JudgedForce)
   safety::InputLimits input;
   double extent_y_mm = 0, extent_r_deg = 0;
 
@@ -557,7 +560,8 @@ struct StopRule {
         return StopCause::kDoubt;
       }
     }
-    if (std::max(c.force_n, 0.0f) > threshold_n) return c.over_range ? StopCause::kOverRange : StopCause::kForce;
+    const float judged = safety::JudgedForce(std::max(c.force_n, 0.0f), c.uncertainty ? c.force_sd_n : 0.0f, c.over_range, stop);
+    if (judged > threshold_n) return c.over_range ? StopCause::kOverRange : StopCause::kForce;
     return StopCause::kNone;
   }
 };
@@ -1083,6 +1087,8 @@ void RunTargets(const TargetsArgs& a, const std::string& command) {
   else if (!(a.level_n > 0)) throw InputError(a.scene + " has no safety section: give --level-n");
   StopRule rule;
   rule.input = safety.input;
+  rule.stop = safety.stop_rule;
+  if (a.sd_k_set) rule.stop.sd_k = static_cast<float>(a.sd_k);
   rule.extent_y_mm = put.spec().extent_y_mm;
   rule.extent_r_deg = put.spec().extent_r_deg;
   std::string region;
@@ -1101,6 +1107,8 @@ void RunTargets(const TargetsArgs& a, const std::string& command) {
   }
   std::ostringstream rep;
   rep << "# Targets: " << put.name() << " (" << put.spec().name << "), threshold " << Fmt(rule.threshold_n) << " N\n\n"
+      << "Stop rule: force + " << Fmt(rule.stop.sd_k, "%.2f") << " x sd above the threshold (safety::JudgedForce; an sd "
+      << "counted at most " << Fmt(rule.stop.max_sd_n, "%.2f") << " N when lowering).\n\n"
       << "Model: `" << put.model_path() << "`. Scene: `" << a.scene << "` (the patch's twin as ruffini-sim builds it, "
       << "its edges included). Measured by `" << command << "`.\n\n"
       << "Each point is one stream through the decoder service's whole path without sockets: the twin, the "
@@ -1159,6 +1167,10 @@ void RegisterTargets(CLI::App& app) {
   cmd->add_option("--seed", a->seed, "Light presses' seed (slow: seed + 1); keep it away from the training, calibration "
                                      "and test seeds")->capture_default_str();
   cmd->add_option("--threads", a->threads, "Worker threads")->check(CLI::Range(1u, 64u))->capture_default_str();
+  cmd->add_option_function<double>("--sd-k", [a](double k) { a->sd_k = k; a->sd_k_set = true; },
+                                   "The stop rule's sd_k (default: the scene's safety.stop_rule): stop when force + sd_k x sd "
+                                   "is above the threshold")
+      ->check(CLI::Range(-3.0, 3.0));
   cmd->callback([a, cmd] { RunTargets(*a, CommandLine("coverage-targets", *cmd)); });
 }
 

@@ -64,7 +64,8 @@ v1::PatchMessage Hello(const aggregate::Setup& s, std::size_t patch) {
 
 class CoreTest : public ::testing::Test {
  protected:
-  CoreTest() : setup(CobotSetup()), core(setup, kT0) {}
+  CoreTest() : CoreTest(CobotSetup()) {}
+  explicit CoreTest(aggregate::Setup s) : setup(std::move(s)), core(setup, kT0) {}
   // Opens a stream for patch i and sends its hello; returns the stream id.
   int Connect(std::size_t i, std::int64_t t) {
     const int s = core.OpenStream(t);
@@ -361,6 +362,47 @@ TEST_F(CoreTest, AHardContactStopsAndTheLatencyIsMeasured) {
 // CLEAR, no epoch, the live link HEALTHY and its stream still served. Old code: the spec check came first,
 // SPEC_MISMATCH and OnHelloRefused set the patch REFUSED (FAULT PATCH_MISSING), and every later heartbeat of
 // the live stream was a kNotConnected rejection with a new epoch each.
+// The scene's stop rule reaches the policy through the Core: with sd_k 1, a calibrated 1.3 N +- 0.3 N contact
+// is judged at 1.6 N and stops; the same reading without calibrated uncertainty is judged at 1.3 N.
+class CoreStopRule : public CoreTest {
+ protected:
+  static aggregate::Setup WithSdK(float k) {
+    aggregate::Setup s = CobotSetup();
+    s.safety.stop_rule.sd_k = k;
+    s.safety.stop_rule.source = "test";
+    return s;
+  }
+  CoreStopRule() : CoreTest(WithSdK(1.0f)) {}
+};
+
+TEST_F(CoreStopRule, ACalibratedSdIsJudgedAndAnUncalibratedOneIsNot) {
+  std::vector<int> streams;
+  for (std::size_t i = 0; i < setup.patches.size(); ++i) streams.push_back(Connect(i, kT0));
+  std::int64_t t = kT0;
+  for (; t < kT0 + 300 * kMs; t += 10 * kMs) {
+    core.OnJointState(Joints(t, 0.1), t);
+    for (std::size_t i = 0; i < streams.size(); ++i) Heartbeat(streams[i], i, t);
+    core.Tick(t);
+  }
+  v1::ResetStopRequest r;
+  r.set_stop_epoch(1);
+  r.set_aggregator_run_id(kRunId);
+  ASSERT_TRUE(core.OnReset(r, true, t).accepted());
+  v1::PatchMessage m;
+  m.set_t_ns(t);
+  m.mutable_contact()->set_force_n(1.3f);
+  m.mutable_contact()->set_force_sd_n(0.3f);
+  m.mutable_contact()->set_onset(true);
+  Send(streams[0], 0, m, t);  // uncertainty_calibrated false: the sd is not read
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  m.set_t_ns(t + kMs);
+  m.mutable_contact()->set_onset(false);
+  m.mutable_contact()->set_uncertainty_calibrated(true);
+  Send(streams[0], 0, m, t + kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+  EXPECT_FLOAT_EQ(core.SafetyState().cause().force_n(), 1.3f);  // the cause carries the force as received
+}
+
 TEST_F(CoreTest, ADuplicateHelloIsRefusedFirstAndChangesNothing) {
   const auto streams = ClearAll();
   ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);

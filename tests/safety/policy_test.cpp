@@ -795,9 +795,6 @@ TEST(SafetyNames, AreDistinctSnakeCase) {
   EXPECT_EQ(StateName(State::kStop), "stop");
 }
 
-}  // namespace
-}  // namespace ruffini::safety
-
 namespace ruffini::safety {
 namespace {
 
@@ -932,6 +929,89 @@ TEST(SafetyEvents, LatchesEscalationsAndResetsAreRecorded) {
   for (int k = 0; k < 20; ++k) w.Reset(1);
   EXPECT_EQ(w.data.events().size(), kEventCapacity);
   EXPECT_EQ(w.data.counters().events_dropped, 5u + 20u - kEventCapacity);
+}
+
+}  // namespace
+}  // namespace ruffini::safety
+
+// The scene's stop rule (Config::stop_rule, docs/safety.md "The stop rule"): a contact is judged at
+// force + sd_k x sd.
+void Judge(World& w, float force_n, float sd_n, bool over_range = false) {
+  w.last = w.policy.OnContact(w.data, "forearm", {.force_n = force_n, .force_sd_n = sd_n, .over_range = over_range}, w.t);
+}
+
+TEST(SafetyStopRule, ThePositiveRuleStopsOnAnUncertainReadingBelowTheThreshold) {
+  Config c = TwoPatchScene();
+  c.stop_rule.sd_k = 1.0f;
+  World w(c);
+  w.Clear();
+  Judge(w, 150.0f, 5.0f);  // 155 N judged: below 160
+  EXPECT_EQ(w.state(), State::kClear);
+  Judge(w, 150.0f, 15.0f);  // 165 N judged
+  EXPECT_EQ(w.state(), State::kStop);
+  EXPECT_FLOAT_EQ(w.data.state().cause.judged_n, 165.0f);
+  EXPECT_NE(Describe(w.policy, w.data.state().cause).find("force 150 N (judged 165 N with its sd) above region 'forearm'"),
+            std::string::npos)
+      << Describe(w.policy, w.data.state().cause);
+  // The default rule (sd_k 0) judges the force alone.
+  World d;
+  d.Clear();
+  d.last = d.policy.OnContact(d.data, "forearm", {.force_n = 150.0f, .force_sd_n = 15.0f}, d.t);
+  EXPECT_EQ(d.state(), State::kClear);
+}
+
+TEST(SafetyStopRule, AnUnreadableSdIsADoubtForThePositiveRuleAndIgnoredByTheNegative) {
+  for (const float bad : {kNaN, std::numeric_limits<float>::infinity(), -1.0f}) {
+    Config c = TwoPatchScene();
+    c.stop_rule.sd_k = 0.5f;
+    World w(c);
+    w.Clear();
+    Judge(w, 1.0f, bad);
+    EXPECT_EQ(w.state(), State::kStop) << bad;
+    c.stop_rule.sd_k = -2.0f;
+    World n(c);
+    n.Clear();
+    Judge(n, 161.0f, bad);  // never lowered by an sd it cannot read
+    EXPECT_EQ(n.state(), State::kStop) << bad;
+  }
+}
+
+TEST(SafetyStopRule, TheNegativeRuleAsksForMarginAndIsBounded) {
+  Config c = TwoPatchScene();
+  c.stop_rule.sd_k = -2.0f;
+  c.stop_rule.max_sd_n = 1.0f;
+  World w(c);
+  w.Clear();
+  Judge(w, 161.0f, 0.4f);  // 160.2 judged: still above
+  EXPECT_EQ(w.state(), State::kStop);
+  World b(c);
+  b.Clear();
+  Judge(b, 161.0f, 1.0f);  // 159 judged: the reading does not clear the threshold by 2 sigma
+  EXPECT_EQ(b.state(), State::kClear);
+  // A huge sd (a broken decoder) lowers by at most |sd_k| x max_sd_n: 200 N with an sd of 1000 N stops.
+  Judge(b, 200.0f, 1000.0f);
+  EXPECT_EQ(b.state(), State::kStop);
+  // An over-range contact's force is a lower bound: never lowered.
+  World o(c);
+  o.Clear();
+  Judge(o, 160.5f, 1.0f, /*over_range=*/true);
+  EXPECT_EQ(o.state(), State::kStop);
+}
+
+TEST(SafetyStopRule, JudgedForceNeverGoesBelowZeroAndTheConfigIsValidated) {
+  Config::StopRule neg;
+  neg.sd_k = -3.0f;
+  neg.max_sd_n = 10.0f;
+  EXPECT_EQ(JudgedForce(0.5f, 5.0f, false, neg), 0.0f);
+  EXPECT_EQ(JudgedForce(0.5f, 5.0f, false, Config::StopRule{}), 0.5f);
+  for (const auto& [k, max_sd] : {std::pair{3.5f, 0.5f}, std::pair{kNaN, 0.5f}, std::pair{1.0f, 0.0f}}) {
+    Config::StopRule bad;
+    bad.sd_k = k;
+    bad.max_sd_n = max_sd;
+    Config c = TwoPatchScene();
+    c.stop_rule = bad;
+    EXPECT_THROW(Validate(c), InputError);
+  }
 }
 
 }  // namespace

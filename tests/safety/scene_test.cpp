@@ -203,6 +203,18 @@ TEST_F(SafetyScene, ContactReleaseAndInputLimits) {
   EXPECT_EQ(d.input.max_time_skew_ns, InputLimits{}.max_time_skew_ns);
 }
 
+TEST_F(SafetyScene, StopRule) {
+  const Config c = ConfigFromScene(Write("arm", "arm", kArm, "  stop_rule: {sd_k: -1.5, max_sd_n: 0.3, source: measured}\n"));
+  EXPECT_FLOAT_EQ(c.stop_rule.sd_k, -1.5f);
+  EXPECT_FLOAT_EQ(c.stop_rule.max_sd_n, 0.3f);
+  EXPECT_EQ(c.stop_rule.source, "measured");
+  EXPECT_EQ(ConfigFromScene(Write("arm", "arm", kArm)).stop_rule.sd_k, 0.0f);  // absent: the force alone
+  std::string p = Write("arm", "arm", kArm, "  stop_rule: {sd_k: 1}\n");
+  EXPECT_NE(Message(p).find("'safety.stop_rule.source' is missing"), std::string::npos) << Message(p);
+  p = Write("arm", "arm", kArm, "  stop_rule: {sd_k: 4, source: x}\n");
+  EXPECT_NE(Message(p).find("'safety.stop_rule.sd_k' (4) must lie inside -3..3"), std::string::npos) << Message(p);
+}
+
 TEST_F(SafetyScene, ContactReleaseAndInputLimitsAreValidated) {
   std::string p = Write("arm", "arm", kArm, "  contact_release: {fraction: 0.1, hold_ms: 100}\n");
   EXPECT_EQ(Message(p), p + ":12:20: 'safety.contact_release.source' is missing: say why this release level and "

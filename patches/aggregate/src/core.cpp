@@ -432,6 +432,8 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       const auto& pc = setup_.safety.patches[pi];
       safety::Contact sc;
       sc.force_n = c.force_n();
+      sc.force_sd_n = c.uncertainty_calibrated() ? c.force_sd_n() : 0.0f;
+      sc.over_range = c.over_range();
       sc.released = c.released();
       sc.t_ns = m.t_ns();
       sc.doubt = doubt;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <utility>
 
@@ -23,7 +24,7 @@ std::string Quoted(std::string_view s) { return "('" + std::string(s) + "')"; }
 
 bool Cause::operator==(const Cause& o) const noexcept {
   return kind == o.kind && patch == o.patch && region == o.region && SameForce(force_n, o.force_n) &&
-         threshold_n == o.threshold_n && p_bc_m == o.p_bc_m && patch_fault == o.patch_fault && doubt == o.doubt &&
+         threshold_n == o.threshold_n && SameForce(judged_n, o.judged_n) && p_bc_m == o.p_bc_m && patch_fault == o.patch_fault && doubt == o.doubt &&
          t_ns == o.t_ns;
 }
 
@@ -39,6 +40,10 @@ bool PatchState::operator==(const PatchState& o) const noexcept {
 void Validate(const Config& c) {
   auto fail = [](const std::string& what) { throw InputError("safety." + what); };
   if (c.regions.empty()) fail("regions is empty: every patch's contacts are judged in a body region");
+  if (!(c.stop_rule.sd_k >= -3.0f && c.stop_rule.sd_k <= 3.0f) ||
+      !(c.stop_rule.max_sd_n > 0.0f && c.stop_rule.max_sd_n <= 10.0f)) {
+    fail("stop_rule: sd_k must be -3..3 and max_sd_n above 0 and at most 10 N");
+  }
   for (std::size_t i = 0; i < c.regions.size(); ++i) {
     const RegionConfig& r = c.regions[i];
     const std::string at = "regions[" + std::to_string(i) + "]";
@@ -334,6 +339,17 @@ Step Policy::OnHeartbeat(Data& d, std::string_view patch_id, const Heartbeat& hb
   return Finish(d, {});
 }
 
+float JudgedForce(float force_n, float force_sd_n, bool over_range, const Config::StopRule& rule) noexcept {
+  if (rule.sd_k == 0.0f) return force_n;
+  const bool sd_ok = std::isfinite(force_sd_n) && force_sd_n >= 0.0f;
+  if (rule.sd_k > 0.0f) {
+    if (!sd_ok) return std::numeric_limits<float>::infinity();  // an sd that cannot be read: a doubt, above
+    return force_n + rule.sd_k * force_sd_n;
+  }
+  if (!sd_ok || over_range) return force_n;
+  return std::max(0.0f, force_n + rule.sd_k * std::min(force_sd_n, rule.max_sd_n));
+}
+
 Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std::int64_t now_ns) const noexcept {
   if (!Advance(d, now_ns)) return Finish(d, {.rejection = Backwards(d)});
   Cause cause{.kind = CauseKind::kContact,
@@ -377,7 +393,9 @@ Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std
     return Finish(d, {.rejection = why});
   }
   Seen(d, static_cast<std::size_t>(i));
-  const float force_n = std::max(c.force_n, 0.0f);  // within the noise tolerance below 0: judged as 0 N
+  // Within the noise tolerance below 0: judged as 0 N; then the scene's stop rule (the sd, JudgedForce).
+  const float force_n = JudgedForce(std::max(c.force_n, 0.0f), c.force_sd_n, c.over_range, config_.stop_rule);
+  cause.judged_n = force_n;
   const RegionConfig& rc = config_.regions[static_cast<std::size_t>(region)];
   const bool over = force_n > cause.threshold_n;  // at the threshold never stops
   const bool was_over = p.contact_over;
@@ -712,6 +730,9 @@ std::string Describe(const Policy& p, const Cause& c) {
   if (c.patch != kNoPatch) s << " patch '" << p.patch_id(c.patch) << "'";
   if (c.kind == CauseKind::kContact) {
     s << " force " << c.force_n << " N";
+    if (p.config().stop_rule.sd_k != 0.0f && c.judged_n != c.force_n && c.doubt == Rejection::kNone) {
+      s << " (judged " << c.judged_n << " N with its sd)";
+    }
     if (c.region != kNoRegion) s << " above region '" << p.region_name(c.region) << "' threshold " << c.threshold_n << " N";
     if (c.p_bc_m) s << " at (" << (*c.p_bc_m)[0] << ", " << (*c.p_bc_m)[1] << ", " << (*c.p_bc_m)[2] << ") m";
   }

@@ -125,6 +125,13 @@ Config ConfigFromScene(const SceneFile& scene) {
     l.source = Source(*m, "these budgets");
     m->Finish();
   }
+  if (auto m = s.MapOr("stop_rule")) {
+    Config::StopRule& r = c.stop_rule;
+    r.sd_k = static_cast<float>(m->NumberOr("sd_k", r.sd_k, -3.0, 3.0));
+    r.max_sd_n = static_cast<float>(m->NumberOr("max_sd_n", r.max_sd_n, 0.001, 10.0));
+    r.source = Source(*m, "this stop rule (what it costs in false stops and misses)");
+    m->Finish();
+  }
   if (auto m = s.MapOr("coverage")) {
     CoverageConfig& cov = c.coverage;
     cov.press_factor = m->NumberOr("press_factor", cov.press_factor, 1.0, 100.0);

@@ -196,7 +196,21 @@ struct Config {
     std::string source;                             // the scene's `source:` (empty: these defaults)
   } link{};
   CoverageConfig coverage{};
+  // The stop rule (the scene's `stop_rule`; docs/safety.md, "The stop rule"): a contact is judged at
+  // force + sd_k x force_sd (JudgedForce), so sd_k > 0 stops earlier on an uncertain reading and sd_k < 0 asks
+  // the reading to clear the threshold by |sd_k| sigma. 0 (the default): the force alone, as always.
+  struct StopRule {
+    float sd_k = 0.0f;         // -3 .. 3
+    float max_sd_n = 0.5f;     // sd_k < 0: the sd counted at most this (a broken sd must not hide a stop)
+    std::string source;        // the scene's `source:` (empty: the default)
+  } stop_rule{};
 };
+
+// The force a contact is judged at against its threshold (and its release level): force_n + sd_k x sd.
+// A non-finite or negative sd counts as infinite when sd_k > 0 (a doubt stops) and as 0 when sd_k < 0 (never
+// lowers); sd_k < 0 lowers by at most |sd_k| x max_sd_n; an over-range contact (force_n is a lower bound) is
+// never lowered. The result is never below 0.
+float JudgedForce(float force_n, float force_sd_n, bool over_range, const Config::StopRule& rule) noexcept;
 
 // Throws InputError naming the field and the value: "safety.patches[2].id ('forearm') is a duplicate".
 void Validate(const Config& c);
@@ -217,6 +231,8 @@ struct Contact {
   bool released = false;          // the frame that ends the contact
   std::int64_t t_ns = 0;          // when the frame was measured (interrogator clock); 0: now_ns
   std::optional<std::array<double, 3>> p_bc_m{};  // where on the body (base frame B, m), when placed
+  float force_sd_n = 0;           // the decoder's 1-sigma (0: not calibrated); used by Config::stop_rule only
+  bool over_range = false;        // force_n is a lower bound (never lowered by the stop rule)
   // The caller found the frame untrustworthy (kBadPosition, kBadCovariance, kImplausibleTime): refused as a
   // doubt (STOP), counted under that rejection; p_bc_m is then ignored.
   Rejection doubt = Rejection::kNone;
@@ -237,6 +253,7 @@ struct Cause {
   std::int32_t region = kNoRegion;    // index into Config.regions (kContact with a known region)
   float force_n = 0;                  // kContact: the force as received (NaN stays NaN: a doubt)
   float threshold_n = 0;              // kContact: the threshold it was judged against (0: none known)
+  float judged_n = 0;                 // kContact: what was judged (Config::stop_rule: force + sd_k x sd)
   std::optional<std::array<double, 3>> p_bc_m{};  // kContact: where, when placed
   PatchFaultCode patch_fault = PatchFaultCode::kUnspecified;  // kPatchFault
   Rejection doubt = Rejection::kNone;  // set when the cause is a refused input (a doubt, not a measurement)
