@@ -1,5 +1,6 @@
 #include "scene_setup.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -89,6 +90,9 @@ std::string Describe(const aggregate::Setup& setup) {
     }
     out << ";";
   }
+  const auto& rule = setup.safety.stop_rule;
+  if (rule.sd_k == 0.0f) out << " stop rule: the force alone;";
+  else out << " stop rule: force " << (rule.sd_k > 0 ? "+ " : "- ") << std::abs(rule.sd_k) << " x sd (max_sd_n " << rule.max_sd_n << " N);";
   out << " robot name '" << setup.robot_name << "', run id " << std::hex << setup.run_id << std::dec << ";";
   out << " robot: " << (setup.robot ? setup.robot->name() + " (" + std::to_string(setup.robot->num_dof()) + " joints)" : "none");
   return out.str();
@@ -145,7 +149,9 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
       cp.extent_r_deg = scene.patches[i].spec.extent_r_deg;
       patches.push_back(cp);
     }
-    decode::RegionGuarantee g = decode::GuaranteeRegion(patches, bands, r.threshold_n, cov.press_factor);
+    // A stop rule that lowers a force (sd_k < 0) needs maps at the threshold plus the largest lowering.
+    const double margin = std::max(0.0f, -config.stop_rule.sd_k) * config.stop_rule.max_sd_n;
+    decode::RegionGuarantee g = decode::GuaranteeRegion(patches, bands, r.threshold_n, cov.press_factor, margin);
     v1::RegionCoverage rc;
     rc.set_region(r.name);
     rc.set_threshold_n(r.threshold_n);
@@ -177,8 +183,11 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
       if (!g.unmapped.empty()) {
         why += "not guaranteed: the model of patch";
         for (const auto& id : g.unmapped) why += " " + id;
-        why += " has no sensitivity map at or above " + Num(r.threshold_n) +
-               " N (measure one with `ruffini sensitivity`, or accept the whole patch as uncovered)";
+        why += " has no sensitivity map at or above " + Num(r.threshold_n + margin) + " N";
+        if (margin > 0) {
+          why += " (the threshold plus the stop rule's largest lowering, |sd_k| x max_sd_n = " + Num(margin) + " N)";
+        }
+        why += " (measure one with `ruffini sensitivity`, or accept the whole patch as uncovered)";
       } else {
         why += "below what its patches guarantee, " + Num(g.guaranteed_threshold_n) + " N (" +
                std::to_string(g.uncovered.size()) + " of " + std::to_string(g.covered_points) +

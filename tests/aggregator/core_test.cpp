@@ -373,7 +373,54 @@ class CoreStopRule : public CoreTest {
     return s;
   }
   CoreStopRule() : CoreTest(WithSdK(1.0f)) {}
+  explicit CoreStopRule(float k) : CoreTest(WithSdK(k)) {}
+  // Every patch connected and healthy, epoch 1 reset: CLEAR. Returns the streams; t is the time after.
+  std::vector<int> Clear(std::int64_t& t) {
+    std::vector<int> streams;
+    for (std::size_t i = 0; i < setup.patches.size(); ++i) streams.push_back(Connect(i, kT0));
+    for (t = kT0; t < kT0 + 300 * kMs; t += 10 * kMs) {
+      core.OnJointState(Joints(t, 0.1), t);
+      for (std::size_t i = 0; i < streams.size(); ++i) Heartbeat(streams[i], i, t);
+      core.Tick(t);
+    }
+    v1::ResetStopRequest r;
+    r.set_stop_epoch(1);
+    r.set_aggregator_run_id(kRunId);
+    EXPECT_TRUE(core.OnReset(r, true, t).accepted());
+    return streams;
+  }
 };
+
+class CoreLoweringStopRule : public CoreStopRule {
+ protected:
+  CoreLoweringStopRule() : CoreStopRule(-1.0f) {}
+};
+
+// With sd_k -1 a two-touch frame's force (the stronger fitted touch's lower bound) is never lowered again:
+// 1.6 N +- 0.3 N flagged multiple stops; the same reading of one touch is judged 1.3 N.
+TEST_F(CoreLoweringStopRule, ATwoTouchFramesForceIsALowerBoundAndNotLowered) {
+  std::int64_t t = 0;
+  const std::vector<int> streams = Clear(t);
+  v1::PatchMessage m;
+  m.set_t_ns(t);
+  auto* c = m.mutable_contact();
+  c->set_force_n(1.6f);
+  c->set_force_sd_n(0.3f);
+  c->set_uncertainty_calibrated(true);
+  c->set_onset(true);
+  c->set_located(true);
+  c->set_y_mm(75.0f);
+  c->set_r_deg(72.5f);
+  c->set_cov_yy_mm2(400.0f);
+  c->set_cov_rr_mm2(400.0f);
+  Send(streams[0], 0, m, t);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR) << "one touch: judged 1.3 N";
+  m.set_t_ns(t + kMs);
+  c->set_onset(false);
+  c->set_multiple(true);
+  Send(streams[0], 0, m, t + kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+}
 
 TEST_F(CoreStopRule, ACalibratedSdIsJudgedAndAnUncalibratedOneIsNot) {
   std::vector<int> streams;

@@ -128,6 +128,10 @@ TEST(Sensitivity, ARegionBelowItsGuaranteeIsRefusedAnAcceptedBandMakesItHold) {
   EXPECT_EQ(g.bands[1].uncovered_points, 0u);
   // A band on the wrong patch does not help.
   EXPECT_FALSE(GuaranteeRegion(patches, {{"middle", "b", 70, 80, 90, 110, "t"}}, 1.5, 1.5).ok());
+  // A stop rule that may lower a force by 0.5 N needs maps at 2.0 N: these 1.5 N maps guarantee nothing.
+  g = GuaranteeRegion(patches, bands, 1.5, 1.5, 0.5);
+  EXPECT_FALSE(g.ok());
+  EXPECT_EQ(g.unmapped.size(), 2u);
 }
 
 TEST(Sensitivity, ABandWithoutAPatchLiesOnEveryPatch) {

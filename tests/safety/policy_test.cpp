@@ -988,14 +988,45 @@ TEST(SafetyStopRule, TheNegativeRuleAsksForMarginAndIsBounded) {
   b.Clear();
   Judge(b, 161.0f, 1.0f);  // 159 judged: the reading does not clear the threshold by 2 sigma
   EXPECT_EQ(b.state(), State::kClear);
-  // A huge sd (a broken decoder) lowers by at most |sd_k| x max_sd_n: 200 N with an sd of 1000 N stops.
-  Judge(b, 200.0f, 1000.0f);
-  EXPECT_EQ(b.state(), State::kStop);
+  // An sd above max_sd_n (a broken or forged decoder) never lowers: 161 N with an sd of 1000 N or FLT_MAX stops.
+  for (const float huge : {1000.0f, std::numeric_limits<float>::max()}) {
+    World h(c);
+    h.Clear();
+    Judge(h, 161.0f, huge);
+    EXPECT_EQ(h.state(), State::kStop) << huge;
+  }
   // An over-range contact's force is a lower bound: never lowered.
   World o(c);
   o.Clear();
   Judge(o, 160.5f, 1.0f, /*over_range=*/true);
   EXPECT_EQ(o.state(), State::kStop);
+}
+
+// A lowering rule may delay a STOP's start, never end one early: the release is judged on the force too.
+// (The adversarial review: a contact eased to just above the release level, its reading lowered below it,
+// had its cause ended after the hold.)
+TEST(SafetyStopRule, ALoweringRuleNeverEndsACauseWhileTheForceIsAboveTheReleaseLevel) {
+  Config c = TwoPatchScene();
+  c.stop_rule.sd_k = -2.0f;
+  c.stop_rule.max_sd_n = 1.0f;
+  World w(c);
+  w.Clear();
+  w.touching.insert("forearm");
+  Judge(w, 170.0f, 1.0f);
+  ASSERT_EQ(w.state(), State::kStop);
+  // 145 N: above the release level (160 x 0.9 = 144), judged 143 N (below it).
+  for (int k = 0; k < 30; ++k) {
+    w.Beat(10);
+    Judge(w, 145.0f, 1.0f);
+  }
+  EXPECT_EQ(w.ResetCurrent().reason, ResetRefusal::kCausePresent) << "the contact cause ended while 145 N was read";
+  EXPECT_EQ(w.state(), State::kStop);
+  // Once the force itself is below the release level for the hold, the cause ends.
+  for (int k = 0; k < 30; ++k) {
+    w.Beat(10);
+    Judge(w, 100.0f, 1.0f);
+  }
+  EXPECT_TRUE(w.ResetCurrent().accepted);
 }
 
 TEST(SafetyStopRule, JudgedForceNeverGoesBelowZeroAndTheConfigIsValidated) {
@@ -1012,6 +1043,14 @@ TEST(SafetyStopRule, JudgedForceNeverGoesBelowZeroAndTheConfigIsValidated) {
     c.stop_rule = bad;
     EXPECT_THROW(Validate(c), InputError);
   }
+  // The largest lowering must stay within half of every threshold: 1 x 1 N against a 1.5 N region is refused.
+  Config c = TwoPatchScene();
+  c.regions[2].threshold_n = 1.5f;
+  c.stop_rule.sd_k = -1.0f;
+  c.stop_rule.max_sd_n = 1.0f;
+  EXPECT_THROW(Validate(c), InputError);
+  c.stop_rule.max_sd_n = 0.5f;
+  EXPECT_NO_THROW(Validate(c));
 }
 
 }  // namespace

@@ -433,7 +433,9 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       safety::Contact sc;
       sc.force_n = c.force_n();
       sc.force_sd_n = c.uncertainty_calibrated() ? c.force_sd_n() : 0.0f;
-      sc.over_range = c.over_range();
+      // Lower bounds the stop rule never lowers: an over-range contact, and a two-touch frame (its force may be
+      // the stronger fitted touch's lower bound, docs/decoders.md "Two touches").
+      sc.over_range = c.over_range() || (c.located() && c.multiple());
       sc.released = c.released();
       sc.t_ns = m.t_ns();
       sc.doubt = doubt;

@@ -49,7 +49,7 @@ const v1::SensitivityMap* MapForThreshold(const google::protobuf::RepeatedPtrFie
 }
 
 RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const std::vector<UncoveredBand>& bands,
-                                double threshold_n, double press_factor) {
+                                double threshold_n, double press_factor, double judge_margin_n) {
   RegionGuarantee g;
   g.threshold_n = threshold_n;
   g.press_factor = press_factor;
@@ -70,7 +70,7 @@ RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const
     for (std::size_t b = 0; b < bands.size(); ++b) {
       if (bands[b].On(p.id)) mine.push_back(b);
     }
-    const v1::SensitivityMap* m = p.maps ? MapForThreshold(*p.maps, threshold_n) : nullptr;
+    const v1::SensitivityMap* m = p.maps ? MapForThreshold(*p.maps, threshold_n + std::max(0.0, judge_margin_n)) : nullptr;
     if (m == nullptr) {
       bool whole = false;
       for (std::size_t b : mine) {

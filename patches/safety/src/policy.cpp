@@ -44,6 +44,17 @@ void Validate(const Config& c) {
       !(c.stop_rule.max_sd_n > 0.0f && c.stop_rule.max_sd_n <= 10.0f)) {
     fail("stop_rule: sd_k must be -3..3 and max_sd_n above 0 and at most 10 N");
   }
+  if (c.stop_rule.sd_k < 0.0f) {
+    const float lowering = -c.stop_rule.sd_k * c.stop_rule.max_sd_n;
+    for (const RegionConfig& r : c.regions) {
+      if (lowering > 0.5f * r.threshold_n) {
+        std::ostringstream s;
+        s << "stop_rule: the largest lowering |sd_k| x max_sd_n (" << lowering << " N) must be at most half of every "
+          << "region's threshold (region " << Quoted(r.name) << ": " << r.threshold_n << " N)";
+        fail(s.str());
+      }
+    }
+  }
   for (std::size_t i = 0; i < c.regions.size(); ++i) {
     const RegionConfig& r = c.regions[i];
     const std::string at = "regions[" + std::to_string(i) + "]";
@@ -346,8 +357,9 @@ float JudgedForce(float force_n, float force_sd_n, bool over_range, const Config
     if (!sd_ok) return std::numeric_limits<float>::infinity();  // an sd that cannot be read: a doubt, above
     return force_n + rule.sd_k * force_sd_n;
   }
-  if (!sd_ok || over_range) return force_n;
-  return std::max(0.0f, force_n + rule.sd_k * std::min(force_sd_n, rule.max_sd_n));
+  // An sd above max_sd_n is no reading this rule trusts (a broken or forged sd): it never lowers.
+  if (!sd_ok || over_range || force_sd_n > rule.max_sd_n) return force_n;
+  return std::max(0.0f, force_n + rule.sd_k * force_sd_n);
 }
 
 Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std::int64_t now_ns) const noexcept {
@@ -396,6 +408,9 @@ Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std
   // Within the noise tolerance below 0: judged as 0 N; then the scene's stop rule (the sd, JudgedForce).
   const float force_n = JudgedForce(std::max(c.force_n, 0.0f), c.force_sd_n, c.over_range, config_.stop_rule);
   cause.judged_n = force_n;
+  // The end of a cause is judged on the larger of the force and what was judged: a rule that lowers the
+  // force (sd_k < 0) may delay a STOP's start, never end one while the reading is above the release level.
+  const float release_force_n = std::max(force_n, std::max(c.force_n, 0.0f));
   const RegionConfig& rc = config_.regions[static_cast<std::size_t>(region)];
   const bool over = force_n > cause.threshold_n;  // at the threshold never stops
   const bool was_over = p.contact_over;
@@ -408,7 +423,7 @@ Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std
     p.contact_below_since_t_ns.reset();
   } else if (was_over) {
     // Hysteresis: the cause ends once the force has stayed below the release level for the hold time.
-    if (force_n < cause.threshold_n * (1.0f - rc.release.fraction)) {
+    if (release_force_n < cause.threshold_n * (1.0f - rc.release.fraction)) {
       if (!p.contact_below_since_t_ns) p.contact_below_since_t_ns = now_ns;
       if (now_ns - *p.contact_below_since_t_ns >= rc.release.hold_ns) {
         p.contact_over = false;

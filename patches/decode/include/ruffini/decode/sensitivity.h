@@ -70,9 +70,11 @@ struct RegionGuarantee {
   [[nodiscard]] bool ok() const noexcept { return unmapped.empty() && threshold_n >= guaranteed_threshold_n; }
 };
 
-// Computes a region's guarantee. A patch with no map at or above threshold_n is unmapped unless one band
-// accepts all of its extent. map_level_n is the largest level used over the region's patches.
+// Computes a region's guarantee. A patch with no map at or above threshold_n + judge_margin_n is unmapped
+// unless one band accepts all of its extent. map_level_n is the largest level used over the region's patches.
+// judge_margin_n: the most the stop rule may lower a force before it is compared with the threshold
+// (safety.stop_rule with sd_k < 0: |sd_k| x max_sd_n), so a press must be reported above threshold + margin.
 RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const std::vector<UncoveredBand>& bands,
-                                double threshold_n, double press_factor);
+                                double threshold_n, double press_factor, double judge_margin_n = 0.0);
 
 }  // namespace ruffini::decode

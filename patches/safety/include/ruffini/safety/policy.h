@@ -201,15 +201,17 @@ struct Config {
   // the reading to clear the threshold by |sd_k| sigma. 0 (the default): the force alone, as always.
   struct StopRule {
     float sd_k = 0.0f;         // -3 .. 3
-    float max_sd_n = 0.5f;     // sd_k < 0: the sd counted at most this (a broken sd must not hide a stop)
+    float max_sd_n = 0.5f;     // sd_k < 0: an sd above this is not trusted and never lowers (a broken sd)
     std::string source;        // the scene's `source:` (empty: the default)
   } stop_rule{};
 };
 
-// The force a contact is judged at against its threshold (and its release level): force_n + sd_k x sd.
-// A non-finite or negative sd counts as infinite when sd_k > 0 (a doubt stops) and as 0 when sd_k < 0 (never
-// lowers); sd_k < 0 lowers by at most |sd_k| x max_sd_n; an over-range contact (force_n is a lower bound) is
-// never lowered. The result is never below 0.
+// The force a contact is judged at against its threshold: force_n + sd_k x sd. A non-finite or negative sd
+// counts as infinite when sd_k > 0 (a doubt stops). When sd_k < 0 it never lowers: an sd that is not finite,
+// negative or above max_sd_n, and a force that is a lower bound (an over-range contact, a raised two-touch
+// force), are judged as the force; otherwise it lowers by at most |sd_k| x max_sd_n (Validate keeps that at
+// most half of every threshold). The result is never below 0. The end of a cause is judged on the larger of
+// the force and this (a lowering rule never ends a STOP early).
 float JudgedForce(float force_n, float force_sd_n, bool over_range, const Config::StopRule& rule) noexcept;
 
 // Throws InputError naming the field and the value: "safety.patches[2].id ('forearm') is a duplicate".
@@ -232,7 +234,8 @@ struct Contact {
   std::int64_t t_ns = 0;          // when the frame was measured (interrogator clock); 0: now_ns
   std::optional<std::array<double, 3>> p_bc_m{};  // where on the body (base frame B, m), when placed
   float force_sd_n = 0;           // the decoder's 1-sigma (0: not calibrated); used by Config::stop_rule only
-  bool over_range = false;        // force_n is a lower bound (never lowered by the stop rule)
+  bool over_range = false;        // force_n is a lower bound: over range, or a two-touch frame's raised force
+                                  // (never lowered by the stop rule)
   // The caller found the frame untrustworthy (kBadPosition, kBadCovariance, kImplausibleTime): refused as a
   // doubt (STOP), counted under that rejection; p_bc_m is then ignored.
   Rejection doubt = Rejection::kNone;
