@@ -71,6 +71,8 @@ class ScriptedPipeline final : public link::FramePipeline {
   const decode::BaselineTracker& baseline() const noexcept override { return tracker; }
   const decode::PipelineCounters& counters() const noexcept override { return c; }
   bool calibrated_uncertainty() const noexcept override { return uncertainty; }
+  int breaks = 0;
+  void OnStreamBreak() noexcept override { ++breaks; }
 };
 
 struct VectorSink final : link::MessageSink {
@@ -262,6 +264,8 @@ TEST_F(MonitorTest, SerialGapsAreCounted) {
   Feed(m, t, 1, 10);                   // 1 lost
   EXPECT_EQ(m.health().serial_gaps, 2u);
   EXPECT_EQ(m.health().frames_lost, 4u);
+  // Each break tells the pipeline (the two-touch cache starts afresh): the connect and the two gaps.
+  EXPECT_EQ(pipe.breaks, 3);
 }
 
 TEST_F(MonitorTest, FaultPriorityAndOverloadHold) {

@@ -73,6 +73,7 @@ class PipelineRunner final : public FramePipeline {
   [[nodiscard]] const decode::BaselineTracker& baseline() const noexcept override { return data_.baseline(); }
   [[nodiscard]] const decode::PipelineCounters& counters() const noexcept override { return data_.counters(); }
   [[nodiscard]] bool calibrated_uncertainty() const noexcept override { return pipeline_.calibrated_uncertainty(); }
+  void OnStreamBreak() noexcept override { data_.ForgetTouches(); }
 
  private:
   decode::Pipeline<Scalar> pipeline_;
@@ -246,6 +247,7 @@ void Monitor::OnConnected(Now now, MessageSink& sink) noexcept {
   connected_ = true;
   have_frame_ = false;
   connected_mono_ = now.mono_ns;
+  pipeline_.OnStreamBreak();
   reject_run_ = 0;
   Update(now, sink);
 }
@@ -264,6 +266,7 @@ void Monitor::OnFrame(const FrameIn& f, Now now, MessageSink& sink) noexcept {
     ++health_.serial_gaps;
     health_.frames_lost += f.serial - last_serial_ - 1;
   }
+  if (have_serial_ && f.serial != last_serial_ + 1) pipeline_.OnStreamBreak();  // lost, repeated or restarted
   have_serial_ = true;
   last_serial_ = f.serial;
   last_t_ns_ = f.t_ns;

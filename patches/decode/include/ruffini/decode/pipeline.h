@@ -145,6 +145,9 @@ class Pipeline {
     explicit Data(const Pipeline& p);
     [[nodiscard]] const BaselineTracker& baseline() const noexcept { return tracker_; }
     [[nodiscard]] const PipelineCounters& counters() const noexcept { return counters_; }
+    // The stream broke (frames lost, a reconnect): the next flagged frame fits its two touches afresh
+    // instead of re-solving forces at places fitted before the break.
+    void ForgetTouches() noexcept { pair_age_ = 1 << 30; }
 
    private:
     friend class Pipeline;

@@ -51,6 +51,9 @@ class FramePipeline {
   [[nodiscard]] virtual const decode::BaselineTracker& baseline() const noexcept = 0;
   [[nodiscard]] virtual const decode::PipelineCounters& counters() const noexcept = 0;
   [[nodiscard]] virtual bool calibrated_uncertainty() const noexcept = 0;
+  // The interrogator stream broke (a serial gap or a reconnect): state that assumes consecutive frames (the
+  // two-touch fit's cached places) starts afresh.
+  virtual void OnStreamBreak() noexcept {}
 };
 
 // A decoder configuration users pick at deployment (a point of the bench's speed/accuracy table): the
