@@ -95,17 +95,7 @@ std::vector<std::uint8_t> WireFrame(const twin::SkinTwin& tw, twin::Interrogator
   if (c != nullptr) tw.StrainShiftsPm(std::span<const twin::Contact>(c, 1), s, flags);
   Wavelengths wl{};
   sim.Read(t_s, s, wl, flags);
-  std::array<double, kGratings> seen{};
-  std::size_t n = 0;
-  for (double nm : wl) {
-    if (!std::isnan(nm)) seen[n++] = nm;
-  }
-  std::sort(seen.begin(), seen.begin() + static_cast<std::ptrdiff_t>(n));
-  ingest::PeakSample ps;
-  ps.serial_number = serial;
-  ps.timestamp_ns = kEpochNs + static_cast<std::int64_t>(t_s * 1e9);
-  ps.channel_peaks_nm[0] = std::span<const double>(seen.data(), n);
-  return ingest::EncodePeaks(ps);
+  return ingest::EncodeWavelengths(serial, kEpochNs + static_cast<std::int64_t>(t_s * 1e9), 0, wl);
 }
 
 // Runs fn(k) for k in [0, n) on `threads` threads (the caller's one of them), with a progress bar on stderr;

@@ -357,11 +357,6 @@ TEST_F(CoreTest, AHardContactStopsAndTheLatencyIsMeasured) {
   EXPECT_NE(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
 }
 
-// Review finding 6: a second hello for a patch with a live, healthy stream is refused DUPLICATE_PATCH before
-// anything else is looked at, whatever it says (here: another spec), and changes nothing: the state stays
-// CLEAR, no epoch, the live link HEALTHY and its stream still served. Old code: the spec check came first,
-// SPEC_MISMATCH and OnHelloRefused set the patch REFUSED (FAULT PATCH_MISSING), and every later heartbeat of
-// the live stream was a kNotConnected rejection with a new epoch each.
 // The scene's stop rule reaches the policy through the Core: with sd_k 1, a calibrated 1.3 N +- 0.3 N contact
 // is judged at 1.6 N and stops; the same reading without calibrated uncertainty is judged at 1.3 N.
 class CoreStopRule : public CoreTest {
@@ -374,21 +369,6 @@ class CoreStopRule : public CoreTest {
   }
   CoreStopRule() : CoreTest(WithSdK(1.0f)) {}
   explicit CoreStopRule(float k) : CoreTest(WithSdK(k)) {}
-  // Every patch connected and healthy, epoch 1 reset: CLEAR. Returns the streams; t is the time after.
-  std::vector<int> Clear(std::int64_t& t) {
-    std::vector<int> streams;
-    for (std::size_t i = 0; i < setup.patches.size(); ++i) streams.push_back(Connect(i, kT0));
-    for (t = kT0; t < kT0 + 300 * kMs; t += 10 * kMs) {
-      core.OnJointState(Joints(t, 0.1), t);
-      for (std::size_t i = 0; i < streams.size(); ++i) Heartbeat(streams[i], i, t);
-      core.Tick(t);
-    }
-    v1::ResetStopRequest r;
-    r.set_stop_epoch(1);
-    r.set_aggregator_run_id(kRunId);
-    EXPECT_TRUE(core.OnReset(r, true, t).accepted());
-    return streams;
-  }
 };
 
 class CoreLoweringStopRule : public CoreStopRule {
@@ -399,8 +379,8 @@ class CoreLoweringStopRule : public CoreStopRule {
 // With sd_k -1 a two-touch frame's force (the stronger fitted touch's lower bound) is never lowered again:
 // 1.6 N +- 0.3 N flagged multiple stops; the same reading of one touch is judged 1.3 N.
 TEST_F(CoreLoweringStopRule, ATwoTouchFramesForceIsALowerBoundAndNotLowered) {
-  std::int64_t t = 0;
-  const std::vector<int> streams = Clear(t);
+  const std::vector<int> streams = ClearAll();
+  const std::int64_t t = tc;
   v1::PatchMessage m;
   m.set_t_ns(t);
   auto* c = m.mutable_contact();
@@ -423,18 +403,9 @@ TEST_F(CoreLoweringStopRule, ATwoTouchFramesForceIsALowerBoundAndNotLowered) {
 }
 
 TEST_F(CoreStopRule, ACalibratedSdIsJudgedAndAnUncalibratedOneIsNot) {
-  std::vector<int> streams;
-  for (std::size_t i = 0; i < setup.patches.size(); ++i) streams.push_back(Connect(i, kT0));
-  std::int64_t t = kT0;
-  for (; t < kT0 + 300 * kMs; t += 10 * kMs) {
-    core.OnJointState(Joints(t, 0.1), t);
-    for (std::size_t i = 0; i < streams.size(); ++i) Heartbeat(streams[i], i, t);
-    core.Tick(t);
-  }
-  v1::ResetStopRequest r;
-  r.set_stop_epoch(1);
-  r.set_aggregator_run_id(kRunId);
-  ASSERT_TRUE(core.OnReset(r, true, t).accepted());
+  const std::vector<int> streams = ClearAll();
+  const std::int64_t t = tc;
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
   v1::PatchMessage m;
   m.set_t_ns(t);
   m.mutable_contact()->set_force_n(1.3f);
@@ -450,6 +421,11 @@ TEST_F(CoreStopRule, ACalibratedSdIsJudgedAndAnUncalibratedOneIsNot) {
   EXPECT_FLOAT_EQ(core.SafetyState().cause().force_n(), 1.3f);  // the cause carries the force as received
 }
 
+// Review finding 6: a second hello for a patch with a live, healthy stream is refused DUPLICATE_PATCH before
+// anything else is looked at, whatever it says (here: another spec), and changes nothing: the state stays
+// CLEAR, no epoch, the live link HEALTHY and its stream still served. Old code: the spec check came first,
+// SPEC_MISMATCH and OnHelloRefused set the patch REFUSED (FAULT PATCH_MISSING), and every later heartbeat of
+// the live stream was a kNotConnected rejection with a new epoch each.
 TEST_F(CoreTest, ADuplicateHelloIsRefusedFirstAndChangesNothing) {
   const auto streams = ClearAll();
   ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);

@@ -88,18 +88,8 @@ class HardPressRig {
       Wavelengths wl{};
       sim.Read(t, s, wl, flags);
       // What ruffini-sim puts on the wire: the channel's peaks in ascending order, a missing one left out.
-      std::array<double, kGratings> seen{};
-      std::size_t n = 0;
-      for (double nm : wl) {
-        if (!std::isnan(nm)) seen[n++] = nm;
-      }
-      std::sort(seen.begin(), seen.begin() + static_cast<std::ptrdiff_t>(n));
-      ingest::PeakSample ps;
-      ps.serial_number = k;
       const std::int64_t t_ns = epoch_ns + static_cast<std::int64_t>(t * 1e9);
-      ps.timestamp_ns = t_ns;
-      ps.channel_peaks_nm[0] = std::span<const double>(seen.data(), n);
-      const std::vector<std::uint8_t> bytes = ingest::EncodePeaks(ps);
+      const std::vector<std::uint8_t> bytes = ingest::EncodeWavelengths(k, t_ns, 0, wl);
       const link::Now now{static_cast<std::int64_t>(t * 1e9), t_ns};
       if (k == static_cast<std::uint64_t>(t_press * rate_hz_)) first_message = sink.messages.size();
       std::span<const std::uint8_t> rest_bytes(bytes);

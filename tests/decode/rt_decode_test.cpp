@@ -103,15 +103,24 @@ v1::DecoderModel ModelWithResponseMap(const patch::PatchSpec& spec) {
   return m;
 }
 
+// The forearm spec, a model with a response map, and its pipeline at 1 kHz (the next two tests').
+struct MapRig {
+  patch::PatchSpec spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
+  v1::DecoderModel model = ModelWithResponseMap(spec);
+  Pipeline<float> p{model, spec, [this] {
+                      PipelineConfig cfg;
+                      cfg.baseline = BaselineFor(model, 1000.0);
+                      cfg.z_limit = 1e6;
+                      return cfg;
+                    }()};
+};
+
 // The same with a ResponseMap and frames two touches far apart: the check flags them and the two-touch fit
 // runs (once every multi_refit_s), still without allocating (review: the RT claim of touches.h was untested).
 TEST(RealTime, PipelineWithAResponseMapDoesNotAllocate) {
-  const auto spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
-  const auto m = ModelWithResponseMap(spec);
-  PipelineConfig cfg;
-  cfg.baseline = BaselineFor(m, 1000.0);
-  cfg.z_limit = 1e6;
-  const Pipeline<float> p(m, spec, cfg);
+  const MapRig rig;
+  const auto& spec = rig.spec;
+  const Pipeline<float>& p = rig.p;
   Pipeline<float>::Data data(p);
   Wavelengths wl;
   long located = 0, multiple = 0;
@@ -136,12 +145,9 @@ TEST(RealTime, PipelineWithAResponseMapDoesNotAllocate) {
 // since invalid() and over_range() return before `located` is computed): the first located frame after the gap is
 // placed from a fresh fit, not at the old pair's centre.
 TEST(RealTime, TheTwoTouchCacheIsNotReusedAcrossAGap) {
-  const auto spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
-  const auto m = ModelWithResponseMap(spec);
-  PipelineConfig cfg;
-  cfg.baseline = BaselineFor(m, 1000.0);
-  cfg.z_limit = 1e6;
-  const Pipeline<float> p(m, spec, cfg);
+  const MapRig rig;
+  const auto& spec = rig.spec;
+  const Pipeline<float>& p = rig.p;
   Pipeline<float>::Data data(p);
   Wavelengths wl;
   PipelineOutput before, after_gap, settled;

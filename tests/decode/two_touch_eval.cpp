@@ -163,26 +163,34 @@ int main(int argc, char** argv) {
     Tally by_sep[3], all_pairs, single;
     StopTally stops[kStopKinds];
     std::uint64_t k = 0;
-    for (int i = 0; i < pairs; ++i) {
-      ProbeAt p[2];
+    // Two touches at least 20 mm apart, each of force(rng); returns their separation, mm.
+    const auto draw_pair = [&](ProbeAt (&p)[2], std::uniform_real_distribution<double>& force) {
       double sep = 0;
       do {
         const auto [y0, r0] = point();
         const auto [y1, r1] = point();
-        p[0] = {y0, r0, pair_force(rng)};
-        p[1] = {y1, r1, pair_force(rng)};
+        p[0] = {y0, r0, force(rng)};
+        p[1] = {y1, r1, force(rng)};
         sep = std::hypot(y1 - y0, (r1 - r0) * mm_per_deg);
       } while (sep < 20.0);
+      return sep;
+    };
+    for (int i = 0; i < pairs; ++i) {
+      ProbeAt p[2];
+      const double sep = draw_pair(p, pair_force);
       const testing::PressOutcome o = rig.Press(std::span<const ProbeAt>(p, 2), 1.5, twin::DeriveSeed(seed, ++k));
       const PressJudgement j = JudgePress(o, std::span<const ProbeAt>(p, 2), mm_per_deg);
       all_pairs.Add(j, o, p[0].force_n + p[1].force_n);
       const double larger = std::max(p[0].force_n, p[1].force_n);
-      if (larger >= 1.65) stops[kPairAbove].Add(o.stops());
-      if (larger >= 1.65 && !o.stops() && std::getenv("TWO_TOUCH_VERBOSE")) {
-        std::fprintf(stderr, "pair not stopped: (%.1f, %.1f, %.2f N) (%.1f, %.1f, %.2f N), largest reported %.2f N\n", p[0].y_mm,
-                     p[0].r_deg, p[0].force_n, p[1].y_mm, p[1].r_deg, p[1].force_n, o.max_force_n);
+      if (larger >= 1.65) {
+        stops[kPairAbove].Add(o.stops());
+        if (!o.stops() && std::getenv("TWO_TOUCH_VERBOSE")) {
+          std::fprintf(stderr, "pair not stopped: (%.1f, %.1f, %.2f N) (%.1f, %.1f, %.2f N), largest reported %.2f N\n",
+                       p[0].y_mm, p[0].r_deg, p[0].force_n, p[1].y_mm, p[1].r_deg, p[1].force_n, o.max_force_n);
+        }
+      } else if (larger <= 1.35) {
+        stops[kPairBelow].Add(o.stops());
       }
-      else if (larger <= 1.35) stops[kPairBelow].Add(o.stops());
       by_sep[sep < 30 ? 0 : sep < 50 ? 1 : 2].Add(j, o, p[0].force_n + p[1].force_n);
       if (std::getenv("TWO_TOUCH_VERBOSE") && j.confident_wrong > 0) {
         std::fprintf(stderr, "pair (%.1f, %.1f, %.2f N) (%.1f, %.1f, %.2f N) sep %.1f: %d located, %d flagged, %d confident wrong\n",
@@ -205,14 +213,7 @@ int main(int argc, char** argv) {
     std::uniform_real_distribution<double> light_pair_force(0.2, 0.7), light_single_force(0.1, 1.35);
     for (int i = 0; i < pairs; ++i) {
       ProbeAt p[2];
-      double sep = 0;
-      do {
-        const auto [y0, r0] = point();
-        const auto [y1, r1] = point();
-        p[0] = {y0, r0, light_pair_force(rng)};
-        p[1] = {y1, r1, light_pair_force(rng)};
-        sep = std::hypot(y1 - y0, (r1 - r0) * mm_per_deg);
-      } while (sep < 20.0);
+      draw_pair(p, light_pair_force);
       const testing::PressOutcome o = rig.Press(std::span<const ProbeAt>(p, 2), 1.5, twin::DeriveSeed(seed, ++k));
       stops[kLightPair].Add(o.stops());
     }

@@ -551,6 +551,22 @@ TEST(HyperionStream, TwinFrameLeavesMissingPeaksOut) {
   EXPECT_EQ(d.wavelength_nm()[3], w[3]);
 }
 
+// A hard press can push a peak past its neighbour's: the frame lists the channel's peaks by wavelength, as
+// the instrument does (a stream in another order is refused as unordered peaks).
+TEST(HyperionStream, TwinFrameListsPeaksByWavelength) {
+  Wavelengths w = Ramp();
+  std::swap(w[4], w[5]);
+  w[9] = std::nan("");
+  const Bytes b = EncodeWavelengths(5, 0, 0, w);
+  ASSERT_EQ(b.size(), 8u + 56u + 15u * 8u);
+  for (std::size_t k = 0; k + 1 < 15; ++k) {
+    double a = 0, c = 0;
+    std::memcpy(&a, b.data() + 64 + 8 * k, 8);
+    std::memcpy(&c, b.data() + 64 + 8 * (k + 1), 8);
+    EXPECT_LT(a, c) << k;
+  }
+}
+
 // --- Command port ------------------------------------------------------------------------------------------
 
 TEST(HyperionCommand, PartialAndBackToBack) {

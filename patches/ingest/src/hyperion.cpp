@@ -157,6 +157,7 @@ std::vector<std::uint8_t> EncodeWavelengths(std::uint64_t serial_number, std::in
   for (const double nm : wavelength_nm) {
     if (!std::isnan(nm)) seen[n++] = nm;
   }
+  std::sort(seen.begin(), seen.begin() + static_cast<std::ptrdiff_t>(n));
   PeakSample s;
   s.serial_number = serial_number;
   s.timestamp_ns = timestamp_ns;

@@ -99,7 +99,8 @@ std::size_t EncodePeaks(const PeakSample& s, std::span<std::uint8_t> out) noexce
 // The same into a new buffer. Throws InputError naming the field when the sample cannot be encoded.
 std::vector<std::uint8_t> EncodePeaks(const PeakSample& s);
 // One patch's frame on one channel (the twin's interrogator): missing peaks (NaN) are left out, as the
-// instrument leaves out a grating it cannot see; the other channels report 0 peaks.
+// instrument leaves out a grating it cannot see, and the rest are listed by wavelength, as the instrument
+// lists a channel's peaks (a hard press can push a peak past its neighbour's); the other channels report 0.
 std::vector<std::uint8_t> EncodeWavelengths(std::uint64_t serial_number, std::int64_t timestamp_ns,
                                             std::size_t channel, const Wavelengths& wavelength_nm);
 
