@@ -24,6 +24,44 @@ std::uint64_t DrawRunId() {
   return id;
 }
 
+namespace {
+
+std::string Num(double v) {
+  if (std::isinf(v)) return "inf";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f", v);
+  return buf;
+}
+
+}  // namespace
+
+std::vector<fusion::FusionConfig::SeamBand> SeamsOf(const aggregate::Setup& setup) {
+  std::vector<robot::MountedSurface> surfaces;
+  for (const auto& p : setup.patches) {
+    if (!p.mount) return {};  // every patch of a scene with a robot has a mount (SetupFromScene)
+    surfaces.push_back({*p.mount, p.extent_y_mm, p.extent_r_deg});
+  }
+  // A side's band comes from its model's map at its region's threshold (the smallest level at or above it).
+  auto band = [&](std::size_t i, robot::PatchEdge edge) {
+    float threshold = 0;
+    for (const auto& r : setup.safety.regions) {
+      if (r.name == setup.safety.patches[i].region) threshold = r.threshold_n;
+    }
+    const v1::SensitivityMap* map = nullptr;
+    for (const auto& m : setup.patches[i].sensitivity) {
+      if (m.level_n() >= threshold && (map == nullptr || m.level_n() < map->level_n())) map = &m;
+    }
+    if (map == nullptr) return 0.0;
+    const robot::MountedSurface& s = surfaces[i];
+    return decode::EdgeReachMm(*map, [&](double y, double r) { return robot::DistanceToEdgeMm(s, edge, {y, r}); });
+  };
+  std::vector<fusion::FusionConfig::SeamBand> out;
+  for (const robot::Seam& seam : robot::FindSeams(surfaces)) {
+    out.push_back({seam, band(seam.a, seam.edge_a), band(seam.b, seam.edge_b)});
+  }
+  return out;
+}
+
 aggregate::Setup SetupFromScene(const std::string& scene_path) {
   const SceneFile file = LoadSceneFile(scene_path);
   if (!file.safety) {
@@ -57,6 +95,7 @@ aggregate::Setup SetupFromScene(const std::string& scene_path) {
   if (!coverage.refusal.empty()) throw InputError(scene_path + ": " + coverage.refusal);
   setup.coverage = std::move(coverage.regions);
   for (std::size_t i = 0; i < setup.patches.size(); ++i) setup.patches[i].sensitivity = std::move(coverage.maps[i]);
+  if (robot) setup.seams = SeamsOf(setup);
   setup.instance = service::InstanceName();
   setup.robot_name = file.name;
   setup.run_id = DrawRunId();
@@ -90,6 +129,11 @@ std::string Describe(const aggregate::Setup& setup) {
     }
     out << ";";
   }
+  for (const auto& sb : setup.seams) {
+    out << " seam " << setup.patches[sb.seam.a].id << " " << robot::ToString(sb.seam.edge_a) << " | "
+        << setup.patches[sb.seam.b].id << " " << robot::ToString(sb.seam.edge_b) << " (bands " << Num(sb.band_a_mm)
+        << " / " << Num(sb.band_b_mm) << " mm" << (sb.band_a_mm > 0 && sb.band_b_mm > 0 ? "" : ": no seam rule, a side has no map") << ");";
+  }
   const auto& rule = setup.safety.stop_rule;
   if (rule.sd_k == 0.0f) out << " stop rule: the force alone;";
   else out << " stop rule: force " << (rule.sd_k > 0 ? "+ " : "- ") << std::abs(rule.sd_k) << " x sd (max_sd_n " << rule.max_sd_n << " N);";
@@ -98,16 +142,6 @@ std::string Describe(const aggregate::Setup& setup) {
   return out.str();
 }
 
-namespace {
-
-std::string Num(double v) {
-  if (std::isinf(v)) return "inf";
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.2f", v);
-  return buf;
-}
-
-}  // namespace
 
 SceneCoverage CoverageOfScene(const std::string& scene_path) {
   const SceneFile file = LoadSceneFile(scene_path);

@@ -14,6 +14,9 @@ namespace ruffini::aggregator {
 // sensitivity maps guarantee outside the scene's accepted uncovered bands (CoverageOfScene's refusal).
 // Setup.robot_name is the scene's `name`; Setup.run_id a fresh DrawRunId().
 aggregate::Setup SetupFromScene(const std::string& scene_path);
+// The seams between the setup's patches (robot::FindSeams over their mounts) with each side's band from its
+// model's sensitivity map at its region's threshold (decode::EdgeReachMm; 0: no map). Empty without mounts.
+std::vector<fusion::FusionConfig::SeamBand> SeamsOf(const aggregate::Setup& setup);
 // A random nonzero 64-bit run id (std::random_device), drawn once per aggregator start.
 std::uint64_t DrawRunId();
 // One line for the log: patches, regions and thresholds (with their guarantees and accepted bands), robot.

@@ -31,6 +31,7 @@ struct PressOutcome {
   float max_force_n = 0.0f; // largest contact force reported
   [[nodiscard]] bool stops() const noexcept { return stop_force || over_range || fault; }
   std::vector<link::Contact> hold;  // the contact messages of the hold (the force steady)
+  std::vector<std::int64_t> hold_t_ns;  // their frames' times (the same for every rig: one clock)
 };
 
 struct ProbeAt {
@@ -118,7 +119,10 @@ class HardPressRig {
       if (m.kind == link::Message::Kind::kFault && m.fault.code != link::FaultCode::kNone) out.fault = true;
       if (m.kind == link::Message::Kind::kContact) {
         const double t = static_cast<double>(m.t_ns - epoch_ns) * 1e-9 - t_press;
-        if (t >= ramp && t <= ramp + hold) out.hold.push_back(m.contact);
+        if (t >= ramp && t <= ramp + hold) {
+          out.hold.push_back(m.contact);
+          out.hold_t_ns.push_back(m.t_ns);
+        }
         out.max_force_n = std::max(out.max_force_n, m.contact.force_n);
         if (m.contact.force_n > threshold_n) out.stop_force = true;
 #ifdef RUFFINI_HAS_OVER_RANGE

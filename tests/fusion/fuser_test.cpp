@@ -81,6 +81,94 @@ TEST(Fuser, SeamContactIsOneContactWithTheForcesSummed) {
   EXPECT_EQ(w.data.counters.merges, 1u);
 }
 
+// Seams with bands (docs/fusion.md, "Seams"): fore_a's Y = 150 edge meets fore_b's Y = 0 edge.
+FusionConfig WithSeamBands(double band_a_mm, double band_b_mm) {
+  FusionConfig c = Config();
+  std::vector<robot::MountedSurface> surfaces;
+  for (const FusionPatch& p : c.patches) surfaces.push_back({p.mount, p.extent_y_mm, p.extent_r_deg});
+  for (const robot::Seam& s : robot::FindSeams(surfaces)) c.seams.push_back({s, band_a_mm, band_b_mm});
+  return c;
+}
+
+TEST(Fuser, FindSeamsFindsTheSeamOnALinkButNotAnOverlapOrAJoint) {
+  const FusionConfig c = WithSeamBands(25, 25);
+  ASSERT_EQ(c.seams.size(), 1u);  // fore_c overlaps both fore patches; upper_a and hand_a meet them across joints
+  EXPECT_EQ(c.seams[0].seam.a, 0u);
+  EXPECT_EQ(c.seams[0].seam.b, 1u);
+  EXPECT_EQ(c.seams[0].seam.edge_a, robot::PatchEdge::kYMax);
+  EXPECT_EQ(c.seams[0].seam.edge_b, robot::PatchEdge::kYMin);
+}
+
+TEST(Fuser, ContactsPulledInFromASeamAreOneContactOnTheSeam) {
+  // Each decoder places a touch on the seam 20 mm inside its own patch (as an interior-trained decoder does),
+  // with a confident 2 mm sd: 40 mm apart, the plain gate keeps them apart.
+  const std::vector<PatchInput> in = {{0, Located(130, 60, 1.0)}, {1, Located(20, 60, 1.5)}};
+  World plain;
+  EXPECT_EQ(plain.Run(in).size(), 2u);
+  World w(WithSeamBands(25, 25));
+  const auto out = w.Run(in);
+  ASSERT_EQ(out.size(), 1u);
+  const BodyContact& b = out[0];
+  ExpectSane(b);
+  EXPECT_DOUBLE_EQ(b.force_n, 2.5);
+  EXPECT_EQ(b.num_patches, 2u);
+  EXPECT_EQ(w.data.counters.seam_pairs, 1u);
+  // On the seam (fore's origin 0.3 m up, the seam 0.15 m up fore), at the contacts' R.
+  EXPECT_NEAR(b.p_BC_m.z(), 0.45, 1e-9);
+  const auto seam_point = w.LiftOne(0, Located(150, 60));
+  EXPECT_NEAR((b.p_BC_m - seam_point.p_BC_m).norm(), 0.0, 1e-9);
+  // Across the seam (along z here) the covariance holds both bands: sd 12.5 mm (half the wider band).
+  EXPECT_NEAR(std::sqrt(b.cov_p_BC_m2(2, 2)) * 1e3, 12.5, 0.01);
+  // Along it, no more than either contact's own 2 mm.
+  const Eigen::Vector3d t_s = (seam_point.n_B.cross(Eigen::Vector3d::UnitZ())).normalized();
+  EXPECT_LE(t_s.dot(b.cov_p_BC_m2 * t_s) * 1e6, 4.0 + 1e-6);
+
+  // A contact outside its band is not on the seam: nothing changes.
+  EXPECT_EQ(World(WithSeamBands(15, 25)).Run(in).size(), 2u);
+  EXPECT_EQ(World(WithSeamBands(25, 15)).Run(in).size(), 2u);
+  EXPECT_EQ(World(WithSeamBands(0, 25)).Run(in).size(), 2u);  // a side without a band: no seam rule
+  // Apart along the seam (30 deg of arc = 21 mm at 2 mm sd each): not one place, so one contact on the seam
+  // whose covariance holds both places (their mixture), forces summed.
+  World apart(WithSeamBands(25, 25));
+  const auto mixed = apart.Run({{0, Located(130, 50, 1.0)}, {1, Located(20, 80, 1.5)}});
+  ASSERT_EQ(mixed.size(), 1u);
+  ExpectSane(mixed[0]);
+  EXPECT_DOUBLE_EQ(mixed[0].force_n, 2.5);
+  EXPECT_EQ(apart.data.counters.seam_mixtures, 1u);
+  EXPECT_NEAR(mixed[0].p_BC_m.z(), 0.45, 1e-9);
+  for (const double r : {50.0, 80.0}) {
+    const Eigen::Vector3d d = w.LiftOne(0, Located(150, r)).p_BC_m - mixed[0].p_BC_m;
+    EXPECT_LT(d.dot(mixed[0].cov_p_BC_m2.ldlt().solve(d)), 2.0) << "R " << r << " lies within 1.5 sd";
+  }
+  // Normals 60 deg apart (R 30 and 90): never one contact, seam or not.
+  World far(WithSeamBands(25, 25));
+  const auto two = far.Run({{0, Located(130, 30, 1.0)}, {1, Located(20, 90, 1.5)}});
+  ASSERT_EQ(two.size(), 2u);
+  EXPECT_EQ(far.data.counters.seam_pairs, 0u);
+  EXPECT_NEAR(two[0].p_BC_m.z(), 0.43, 1e-9);
+  // A force-only side: the plain rules (gated with the covering covariance).
+  World one_located(WithSeamBands(25, 25));
+  one_located.Run({{0, Located(130, 60, 1.0)}, {1, ForceOnly(1.5)}});
+  EXPECT_EQ(one_located.data.counters.seam_pairs, 0u);
+}
+
+TEST(Fuser, SeamBandsAreValidated) {
+  const robot::Model model = testing::TestModel();
+  FusionConfig c = WithSeamBands(25, 25);
+  c.seams[0].band_b_mm = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(Fuser(model, c), InputError);
+  c = WithSeamBands(25, -1);
+  EXPECT_THROW(Fuser(model, c), InputError);
+  c = WithSeamBands(25, 25);
+  c.seams[0].seam.b = 99;
+  try {
+    Fuser f(model, c);
+    FAIL() << "accepted a seam to patch 99";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("fusion.seams[0]"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Fuser, GateAcceptsNearAndRejectsFar) {
   // 2 mm sd on both surface axes for each: the difference along Y has variance 8 mm^2, so the gate (5.991)
   // accepts up to sqrt(5.991 x 8) = 6.92 mm apart.

@@ -108,6 +108,27 @@ TEST(CobotScene, TheForearmPatchesShareASeam) {
   EXPECT_GT(EdgeGapMm(b, b.extent_r_deg, a, 0.0), 40.0);
 }
 
+TEST(CobotScene, FindSeamsFindsTheForearmSeamAndNothingElse) {
+  const RobotScene& s = Cobot();
+  std::vector<MountedSurface> surfaces;
+  for (const MountedPatch& p : s.patches) surfaces.push_back({p.mount, p.extent_y_mm, p.extent_r_deg});
+  const std::vector<Seam> seams = FindSeams(surfaces);
+  ASSERT_EQ(seams.size(), 1u);
+  EXPECT_EQ(s.patches[seams[0].a].name, "forearm_a");
+  EXPECT_EQ(s.patches[seams[0].b].name, "forearm_b");
+  EXPECT_EQ(seams[0].edge_a, PatchEdge::kRMax);
+  EXPECT_EQ(seams[0].edge_b, PatchEdge::kRMin);
+  // The distance to an edge is measured on the surface: arc length for R edges.
+  EXPECT_NEAR(DistanceToEdgeMm(surfaces[seams[0].a], PatchEdge::kRMax, {75.0, 135.0}), 37.4 * 10 * kDeg, 1e-9);
+  EXPECT_NEAR(DistanceToEdgeMm(surfaces[seams[0].b], PatchEdge::kRMin, {75.0, -2.0}), -37.4 * 2 * kDeg, 1e-9);
+  EXPECT_DOUBLE_EQ(DistanceToEdgeMm(surfaces[0], PatchEdge::kYMax, {140.0, 50.0}), surfaces[0].extent_y_mm - 140.0);
+  // Moved 3 mm apart around the limb, the covers no longer meet: no seam.
+  for (std::size_t i = 0; i < surfaces.size(); ++i) {
+    if (s.patches[i].name == "forearm_b") surfaces[i].mount.X_LP = surfaces[i].mount.X_LP * Eigen::AngleAxisd(-3.0 / 37.4, Eigen::Vector3d::UnitY());
+  }
+  EXPECT_TRUE(FindSeams(surfaces).empty());
+}
+
 TEST(CobotScene, TheUpperArmPatchesDoNotTouch) {
   // The check above is not vacuous: two patches 35 deg apart (about 23 mm of arc) are far from 1 mm.
   const MountedPatch& a = *Cobot().FindPatch("upper_arm_a");

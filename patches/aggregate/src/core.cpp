@@ -93,8 +93,11 @@ Core::Core(Setup setup, std::int64_t now_ns)
       fusion::FusionPatch fp;
       fp.id = p.id;
       if (p.mount) fp.mount = *p.mount;
+      fp.extent_y_mm = p.extent_y_mm;
+      fp.extent_r_deg = p.extent_r_deg;
       fc.patches.push_back(fp);
     }
+    fc.seams = setup_.seams;
     fuser_.emplace(*setup_.robot, std::move(fc));
     fusion_data_ = std::make_unique<fusion::FusionData>();
     fusion_inputs_.reserve(setup_.patches.size());

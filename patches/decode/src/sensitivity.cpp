@@ -48,6 +48,27 @@ const v1::SensitivityMap* MapForThreshold(const google::protobuf::RepeatedPtrFie
   return best;
 }
 
+double EdgeReachMm(const v1::SensitivityMap& map, const std::function<double(double, double)>& distance_mm,
+                   double near_mm, double quantile) {
+  std::vector<double> reach;
+  const int nr = map.r_deg_size();
+  for (int iy = 0; iy < map.y_mm_size(); ++iy) {
+    for (int ir = 0; ir < nr; ++ir) {
+      const int k = iy * nr + ir;
+      if (k >= map.location_error_mm_size()) continue;
+      const double d = distance_mm(map.y_mm(iy), map.r_deg(ir));
+      const double e = map.location_error_mm(k);
+      if (d <= near_mm && std::isfinite(e)) reach.push_back(std::max(0.0, d) + e);
+    }
+  }
+  if (reach.empty()) return 0.0;
+  std::sort(reach.begin(), reach.end());
+  const double q = std::clamp(quantile, 0.0, 1.0) * static_cast<double>(reach.size() - 1);
+  const auto lo = static_cast<std::size_t>(q);
+  const std::size_t hi = std::min(lo + 1, reach.size() - 1);
+  return reach[lo] + (q - static_cast<double>(lo)) * (reach[hi] - reach[lo]);
+}
+
 RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const std::vector<UncoveredBand>& bands,
                                 double threshold_n, double press_factor, double judge_margin_n) {
   RegionGuarantee g;

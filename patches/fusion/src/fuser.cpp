@@ -1,5 +1,6 @@
 #include "ruffini/fusion/fuser.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -53,6 +54,22 @@ Fuser::Fuser(const robot::Model& model, FusionConfig config) : config_(std::move
     patch_link_.push_back(robot::ValidateMount(model, p.mount, where + ".mount"));
   }
 
+  for (std::size_t i = 0; i < config_.seams.size(); ++i) {
+    const FusionConfig::SeamBand& sb = config_.seams[i];
+    const std::string where = Field("seams", i);
+    if (sb.seam.a >= config_.patches.size() || sb.seam.b >= config_.patches.size() || sb.seam.a == sb.seam.b) {
+      throw InputError(where + ": patches " + std::to_string(sb.seam.a) + " and " + std::to_string(sb.seam.b) +
+                       " must be two of the " + std::to_string(config_.patches.size()) + " patches");
+    }
+    for (const double band : {sb.band_a_mm, sb.band_b_mm}) {
+      if (!(std::isfinite(band) && band >= 0 && band <= 1000)) {
+        std::ostringstream m;
+        m << where << ": a band (" << band << " mm) must lie in [0, 1000]";
+        throw InputError(m.str());
+      }
+    }
+  }
+
   for (std::size_t k = 0; k < model.num_links(); ++k) neighbours_[k] |= 1u << k;
   if (config_.adjacent_from_model) {
     for (std::size_t k = 1; k < model.num_links(); ++k) {
@@ -83,6 +100,98 @@ std::optional<std::size_t> Fuser::FindPatch(std::string_view id) const noexcept 
 bool Fuser::Adjacent(std::size_t link_a, std::size_t link_b) const noexcept {
   if (link_a >= robot::kMaxLinks || link_b >= robot::kMaxLinks) return false;
   return ((neighbours_[link_a] >> link_b) & 1u) != 0;
+}
+
+namespace {
+
+robot::MountedSurface SurfaceOf(const FusionPatch& p) noexcept {
+  return robot::MountedSurface{p.mount, p.extent_y_mm, p.extent_r_deg};
+}
+
+// The contact moved onto its patch's edge (the seam), keeping its place along the edge.
+SurfaceContact OntoEdge(const FusionPatch& p, robot::PatchEdge edge, SurfaceContact c) noexcept {
+  switch (edge) {
+    case robot::PatchEdge::kYMin: c.y_mm = 0.0; break;
+    case robot::PatchEdge::kYMax: c.y_mm = p.extent_y_mm; break;
+    case robot::PatchEdge::kRMin: c.r_deg = 0.0; break;
+    case robot::PatchEdge::kRMax: c.r_deg = p.extent_r_deg; break;
+  }
+  return c;
+}
+
+// The variance along the edge: the contact's own (Y for an R edge, arc for a Y edge), or the uncalibrated sd.
+double AlongEdgeVariance(const SurfaceContact& c, robot::PatchEdge edge, const LiftConfig& lift) noexcept {
+  if (!c.uncertainty_calibrated) return lift.uncalibrated_sd_mm * lift.uncalibrated_sd_mm;
+  const bool r_edge = edge == robot::PatchEdge::kRMin || edge == robot::PatchEdge::kRMax;
+  return std::max(0.0, r_edge ? c.cov_yy_mm2 : c.cov_ss_mm2);
+}
+
+// The variance across the edge (arc for an R edge, Y for a Y edge), or the uncalibrated sd's.
+double AcrossEdgeVariance(const SurfaceContact& c, robot::PatchEdge edge, const LiftConfig& lift) noexcept {
+  if (!c.uncertainty_calibrated) return lift.uncalibrated_sd_mm * lift.uncalibrated_sd_mm;
+  const bool r_edge = edge == robot::PatchEdge::kRMin || edge == robot::PatchEdge::kRMax;
+  return std::max(0.0, r_edge ? c.cov_ss_mm2 : c.cov_yy_mm2);
+}
+
+}  // namespace
+
+// Seams (docs/fusion.md, "Seams"). A decoder trained on its patch's interior places a touch on the seam well
+// inside its own patch (edge locations are pulled inward), so the two patches' contacts of one probe across a
+// seam lie tens of mm apart, often with covariances that do not cover the gap, and the gate keeps them apart.
+// A contact may be on the seam when the seam lies within its band (how far from the seam its decoder places a
+// touch on it, from its sensitivity map) plus 2 sd of its own across the seam. When both contacts may be, each
+// is moved onto the seam: along it, it keeps its place and variance; across it, it gets a sd of half the wider
+// band (one probe on the seam or two touches in the bands, the estimate covers both). If the two then pass the
+// gate along the seam they are fused as usual (covariance intersection); if not (two places along the seam),
+// both are replaced by their 50/50 mixture (the mean, and the mean covariance plus the spread), one contact
+// whose covariance holds both places, as for two touches on one patch.
+void Fuser::PlaceOnSeams(std::span<const Eigen::Isometry3d> X_BL, FusionData& data) const noexcept {
+  for (const FusionConfig::SeamBand& sb : config_.seams) {
+    const std::size_t a = sb.seam.a, b = sb.seam.b;
+    if (!(sb.band_a_mm > 0 && sb.band_b_mm > 0) || !data.have_[a] || !data.have_[b]) continue;
+    const SurfaceContact& ca = data.input_[a];
+    const SurfaceContact& cb = data.input_[b];
+    if (!ca.located || !cb.located) continue;
+    const FusionPatch& pa = config_.patches[a];
+    const FusionPatch& pb = config_.patches[b];
+    const double da = robot::DistanceToEdgeMm(SurfaceOf(pa), sb.seam.edge_a, {ca.y_mm, ca.r_deg});
+    const double db = robot::DistanceToEdgeMm(SurfaceOf(pb), sb.seam.edge_b, {cb.y_mm, cb.r_deg});
+    if (da - 2.0 * std::sqrt(AcrossEdgeVariance(ca, sb.seam.edge_a, config_.lift)) > sb.band_a_mm ||
+        db - 2.0 * std::sqrt(AcrossEdgeVariance(cb, sb.seam.edge_b, config_.lift)) > sb.band_b_mm) {
+      continue;
+    }
+    const double across_sd_mm = 0.5 * std::max(sb.band_a_mm, sb.band_b_mm);
+    auto lift_onto_seam = [&](const FusionPatch& p, std::size_t i, robot::PatchEdge edge, const SurfaceContact& c,
+                              LiftedContact& out) {
+      const double along = AlongEdgeVariance(c, edge, config_.lift);
+      const double across = across_sd_mm * across_sd_mm;
+      const bool r_edge = edge == robot::PatchEdge::kRMin || edge == robot::PatchEdge::kRMax;
+      Eigen::Matrix2d C = Eigen::Matrix2d::Zero();  // (Y, arc)
+      C(0, 0) = r_edge ? along : across;
+      C(1, 1) = r_edge ? across : along;
+      return Lift(p, X_BL[patch_link_[i]], OntoEdge(p, edge, c), config_.lift, out, &C);
+    };
+    LiftedContact la, lb;
+    if (lift_onto_seam(pa, a, sb.seam.edge_a, ca, la) != Rejection::kNone ||
+        lift_onto_seam(pb, b, sb.seam.edge_b, cb, lb) != Rejection::kNone) {
+      continue;
+    }
+    if (la.n_B.dot(lb.n_B) < cos_max_normal_angle_) continue;
+    const double d2 = TangentMahalanobis2({la.p_BC_m, la.cov_p_BC_m2}, {lb.p_BC_m, lb.cov_p_BC_m2}, la.n_B + lb.n_B);
+    if (!(d2 <= config_.gate_chi2)) {
+      // Two places along the seam: one contact covering both (the main loop fuses identical estimates exactly).
+      const Eigen::Vector3d mean = 0.5 * (la.p_BC_m + lb.p_BC_m);
+      const Eigen::Vector3d half = 0.5 * (la.p_BC_m - lb.p_BC_m);
+      Eigen::Matrix3d P = 0.5 * (la.cov_p_BC_m2 + lb.cov_p_BC_m2) + half * half.transpose();
+      if (Regularize(P) != CovarianceStatus::kOk) continue;
+      la.p_BC_m = lb.p_BC_m = mean;
+      la.cov_p_BC_m2 = lb.cov_p_BC_m2 = P;
+      ++data.counters.seam_mixtures;
+    }
+    data.lifted_[a] = la;
+    data.lifted_[b] = lb;
+    ++data.counters.seam_pairs;
+  }
 }
 
 std::size_t Fuser::Update(std::span<const PatchInput> inputs, std::span<const Eigen::Isometry3d> X_BL,
@@ -120,8 +229,10 @@ std::size_t Fuser::Update(std::span<const PatchInput> inputs, std::span<const Ei
       continue;
     }
     data.have_[in.patch] = true;
+    data.input_[in.patch] = in.contact;
     ++counters.accepted;
   }
+  PlaceOnSeams(X_BL, data);
 
   // 2. and 3. Associate and fuse, in ascending patch index.
   for (std::size_t i = 0; i < n_patches; ++i) {

@@ -83,7 +83,7 @@ Eigen::Matrix3d PatchCoveringMoment_P(const FusionPatch& patch) noexcept {
 }
 
 Rejection Lift(const FusionPatch& patch, const Eigen::Isometry3d& X_BL, const SurfaceContact& c,
-               const LiftConfig& config, LiftedContact& out) noexcept {
+               const LiftConfig& config, LiftedContact& out, const Eigen::Matrix2d* surface_cov_mm2) noexcept {
   if (!Finite(c.force_n) || !Finite(c.force_sd_n) || !Finite(c.y_mm) || !Finite(c.r_deg) || !Finite(c.cov_yy_mm2) ||
       !Finite(c.cov_ys_mm2) || !Finite(c.cov_ss_mm2)) {
     return Rejection::kNotFinite;
@@ -116,7 +116,9 @@ Rejection Lift(const FusionPatch& patch, const Eigen::Isometry3d& X_BL, const Su
     r.p_BC_m = X_BP * geometry.PointM(s);
     r.n_B = R_BP * geometry.NormalAt(s);
     Eigen::Matrix2d C;  // mm^2 on (Y, arc)
-    if (c.uncertainty_calibrated) {
+    if (surface_cov_mm2 != nullptr) {
+      C = *surface_cov_mm2;
+    } else if (c.uncertainty_calibrated) {
       C << c.cov_yy_mm2, c.cov_ys_mm2, c.cov_ys_mm2, c.cov_ss_mm2;
     } else {
       C = config.uncalibrated_sd_mm * config.uncalibrated_sd_mm * Eigen::Matrix2d::Identity();

@@ -1,6 +1,7 @@
 #include "ruffini/robot/mount.h"
 
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "ruffini/error.h"
@@ -45,6 +46,67 @@ std::size_t ValidateMount(const Model& model, const PatchMount& mount, std::stri
     throw InputError(s.str());
   }
   return *link;
+}
+
+const char* ToString(PatchEdge e) noexcept {
+  switch (e) {
+    case PatchEdge::kYMin: return "y_min";
+    case PatchEdge::kYMax: return "y_max";
+    case PatchEdge::kRMin: return "r_min";
+    case PatchEdge::kRMax: return "r_max";
+  }
+  return "unknown";
+}
+
+double DistanceToEdgeMm(const MountedSurface& p, PatchEdge edge, const patch::SurfacePoint& s) noexcept {
+  const patch::Geometry g(p.mount.surface_radius_mm);
+  switch (edge) {
+    case PatchEdge::kYMin: return s.y_mm;
+    case PatchEdge::kYMax: return p.extent_y_mm - s.y_mm;
+    case PatchEdge::kRMin: return g.ArcMm(s.r_deg);
+    case PatchEdge::kRMax: return g.ArcMm(p.extent_r_deg - s.r_deg);
+  }
+  return 0.0;
+}
+
+std::vector<Seam> FindSeams(std::span<const MountedSurface> patches) {
+  std::vector<Seam> seams;
+  for (std::size_t a = 0; a < patches.size(); ++a) {
+    const MountedSurface& pa = patches[a];
+    const patch::Geometry ga(pa.mount.surface_radius_mm);
+    const double out_deg = ga.RDeg(1.0), ym = 0.5 * pa.extent_y_mm, rm = 0.5 * pa.extent_r_deg;
+    const patch::SurfacePoint outside[4] = {{-1.0, rm}, {pa.extent_y_mm + 1.0, rm}, {ym, -out_deg},
+                                            {ym, pa.extent_r_deg + out_deg}};
+    for (std::size_t k = 0; k < 4; ++k) {
+      const Eigen::Vector3d p_L = PatchToLink(pa.mount, outside[k]).p_LS_m;
+      for (std::size_t b = 0; b < patches.size(); ++b) {
+        if (b == a) continue;
+        const MountedSurface& pb = patches[b];
+        if (pb.mount.link != pa.mount.link) continue;
+        const auto proj = LinkToPatch(pb.mount, p_L);
+        if (!proj || std::abs(proj->height_mm) > 1.0) continue;
+        patch::SurfacePoint s = proj->point;
+        if (s.r_deg > pb.extent_r_deg + 180.0) s.r_deg -= 360.0;  // the value nearest the span
+        if (s.y_mm < 0 || s.y_mm > pb.extent_y_mm || s.r_deg < 0 || s.r_deg > pb.extent_r_deg) continue;
+        PatchEdge nearest = PatchEdge::kYMin;
+        double d_min = std::numeric_limits<double>::infinity();
+        for (const PatchEdge e : {PatchEdge::kYMin, PatchEdge::kYMax, PatchEdge::kRMin, PatchEdge::kRMax}) {
+          const double d = DistanceToEdgeMm(pb, e, s);
+          if (d < d_min) {
+            d_min = d;
+            nearest = e;
+          }
+        }
+        if (d_min > 2.0) continue;  // inside b, not where its cover ends: an overlap, not a seam
+        // Probed from both sides: keep one record per pair of edges, the lower index as a.
+        const Seam seam = a < b ? Seam{a, b, static_cast<PatchEdge>(k), nearest} : Seam{b, a, nearest, static_cast<PatchEdge>(k)};
+        bool known = false;
+        for (const Seam& o : seams) known = known || (o.a == seam.a && o.b == seam.b && o.edge_a == seam.edge_a && o.edge_b == seam.edge_b);
+        if (!known) seams.push_back(seam);
+      }
+    }
+  }
+  return seams;
 }
 
 }  // namespace ruffini::robot

@@ -104,17 +104,15 @@ std::vector<PatchLoad> ProbeLoads(const twin::Scene& scene, const MountedScene* 
 twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch) {
   twin::TwinEffects e = scene.EffectsOf(patch);  // the patch's own cast, if it names one
   if (!e.edges || mounts == nullptr || patch >= mounts->robot.patches.size()) return e;
-  // An edge another patch's cover continues beyond (a seam) is `continued`: probe 1 mm outside the middle
-  // of each edge and see whether another patch on the same link and cylinder covers that point.
-  const patch::PatchSpec& spec = scene.patches[patch].spec;
-  const patch::Geometry g(spec);
-  const double out_deg = g.RDeg(1.0), ym = 0.5 * spec.extent_y_mm, rm = 0.5 * spec.extent_r_deg;
-  const patch::SurfacePoint outside[4] = {{-1.0, rm}, {spec.extent_y_mm + 1.0, rm}, {ym, -out_deg},
-                                          {ym, spec.extent_r_deg + out_deg}};
-  for (std::size_t k = 0; k < 4; ++k) {
-    for (const PatchLoad& l : ProbeLoads(scene, mounts, patch, outside[k].y_mm, outside[k].r_deg, 0.0)) {
-      if (l.patch != patch) e.edges->kind[k] = twin::EdgeEffect::Kind::kContinued;
-    }
+  // An edge another patch's cover continues beyond (a seam: robot::FindSeams) is `continued`.
+  std::vector<robot::MountedSurface> surfaces;
+  for (std::size_t i = 0; i < mounts->robot.patches.size() && i < scene.patches.size(); ++i) {
+    const patch::PatchSpec& spec = scene.patches[i].spec;
+    surfaces.push_back({mounts->robot.patches[i].mount, spec.extent_y_mm, spec.extent_r_deg});
+  }
+  for (const robot::Seam& s : robot::FindSeams(surfaces)) {
+    if (s.a == patch) e.edges->kind[static_cast<std::size_t>(s.edge_a)] = twin::EdgeEffect::Kind::kContinued;
+    if (s.b == patch) e.edges->kind[static_cast<std::size_t>(s.edge_b)] = twin::EdgeEffect::Kind::kContinued;
   }
   return e;
 }

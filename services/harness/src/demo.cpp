@@ -689,9 +689,13 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
         << "Each patch's decoder is trained on indentations inside its spec's `indented_area` (R "
         << Fmt("%.1f", spec_area.r_min_deg) << " to " << Fmt("%.1f", spec_area.r_max_deg)
         << " deg, the paper's), so a touch at the seam (R 145 deg of one patch, R 0 of the other) lies outside what "
-           "either decoder can locate: each places it near its area's edge, and the fusion gate, seeing two "
-           "estimates that far apart with their calibrated covariances, keeps them as two contacts. Locating seam "
-           "touches needs patches calibrated up to their edges.\n";
+           "either decoder can locate: each places it near its area's edge, 20 mm or more inside its own patch, with "
+           "covariances that do not reach the seam. The aggregator's seam rule (docs/fusion.md, \"Seams\") knows from "
+           "each model's sensitivity map how far inside a touch on the seam is placed (the bands in its log line): "
+           "when both contacts lie within their bands it puts them on the seam and fuses them (forces summed), with a "
+           "covariance across the seam that holds both bands. The position error that remains is mostly along the "
+           "seam (the edge decoders' Y), and the summed force is the decoders' edge reading, a fraction of the "
+           "probe's (docs/experiments/seam.md).\n";
       seam_section = m.str();
       log("seam: " + std::to_string(n_s) + " frames, median error " + Fmt("%.1f", med(seam)) + " mm (" +
           std::to_string(fused_s) + " from two patches); interior touch median error " + Fmt("%.1f", med(interior)) +

@@ -70,6 +70,9 @@ struct Setup {
   std::string robot_name;          // the scene's `name`
   // Per region, what its patches' sensitivity maps guarantee (computed at load; GetStatus shows it).
   std::vector<v1::RegionCoverage> coverage;
+  // The seams between the patches' covers and their bands (indices into `patches`; from the mounts and the
+  // sensitivity maps at load, docs/fusion.md "Seams"). Used by the fusion when there is a robot.
+  std::vector<fusion::FusionConfig::SeamBand> seams;
 };
 
 // Joint-state rejections (counted, logged by the service; a rejected state is not used).

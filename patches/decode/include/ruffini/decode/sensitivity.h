@@ -9,6 +9,7 @@
 // outside the bands the scene accepts as uncovered), every F(p) <= press_factor x T: a press that strong
 // stops anywhere there. The smallest threshold it can guarantee is max F(p) / press_factor.
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -24,6 +25,13 @@ void ValidateSensitivity(const v1::SensitivityMap& map, const std::string& where
 // The map of the smallest level at or above threshold_n, or nullptr when there is none.
 const v1::SensitivityMap* MapForThreshold(const google::protobuf::RepeatedPtrField<v1::SensitivityMap>& maps,
                                           double threshold_n);
+
+// How far from one edge of its patch the decoder places a touch that is on that edge (the fusion's seam
+// bands, docs/fusion.md "Seams"): over the map's grid points at most near_mm from the edge (distance_mm(y_mm,
+// r_deg) gives a point's distance on the surface), the `quantile` of distance + location error, over the
+// points whose error is finite. 0 when no such point has one.
+double EdgeReachMm(const v1::SensitivityMap& map, const std::function<double(double, double)>& distance_mm,
+                   double near_mm = 5.0, double quantile = 0.9);
 
 // A part of a patch a scene accepts as not covered (safety.coverage.accepted_uncovered).
 struct UncoveredBand {

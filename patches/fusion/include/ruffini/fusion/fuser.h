@@ -55,6 +55,14 @@ struct FusionConfig {
   double max_normal_angle_deg = 45.0;   // (0, 180]
   bool fuse_unlocated = true;           // false: a force-only contact is never merged with anything
   LiftConfig lift;
+  // Seams (robot::FindSeams over the patches' mounts, indices into `patches`) with their bands: how far from
+  // the seam each side's decoder may place a touch that is on the seam (band_a_mm for patch a, mm on the
+  // surface; 0: no seam rule). See "Seams" in docs/fusion.md.
+  struct SeamBand {
+    robot::Seam seam;
+    double band_a_mm = 0.0, band_b_mm = 0.0;
+  };
+  std::vector<SeamBand> seams;
 };
 
 // One patch's contact at this instant. `patch` indexes FusionConfig::patches (Fuser::FindPatch).
@@ -84,6 +92,8 @@ struct FusionCounters {
   std::uint64_t inputs = 0;
   std::uint64_t accepted = 0;
   std::uint64_t merges = 0;  // pairwise fusions performed
+  std::uint64_t seam_pairs = 0;     // pairs of contacts placed on their seam (FusionConfig::seams)
+  std::uint64_t seam_mixtures = 0;  // of them, two places along the seam made one covering contact
   std::array<std::uint64_t, kRejectionCount> rejected{};  // by Rejection value (kNone unused)
   [[nodiscard]] std::uint64_t rejected_total() const noexcept;
 };
@@ -108,6 +118,7 @@ struct FusionData {
   std::array<BodyContact, kMaxPatches> contacts_{};
   std::size_t num_contacts_ = 0;
   std::array<LiftedContact, kMaxPatches> lifted_{};
+  std::array<SurfaceContact, kMaxPatches> input_{};
   std::array<bool, kMaxPatches> have_{};
   std::array<Cluster, kMaxPatches> clusters_{};
 };
@@ -135,6 +146,8 @@ class Fuser {
                      FusionData& data) const noexcept;
 
  private:
+  void PlaceOnSeams(std::span<const Eigen::Isometry3d> X_BL, FusionData& data) const noexcept;
+
   FusionConfig config_;
   std::vector<std::size_t> patch_link_;
   std::array<std::uint32_t, robot::kMaxLinks> neighbours_{};  // bit j of neighbours_[i]: links i, j adjacent

@@ -92,8 +92,11 @@ struct LiftedContact {
 // Lifts c (a contact on `patch`) into B, given the pose of the patch's link in B (X_BL, from robot FK).
 // Returns kNone and fills out, or the reason it refused c (out untouched). Never produces a NaN.
 // Real-time safe: no allocation, no lock, no throw.
+// surface_cov_mm2 (located contacts only): the surface covariance to use instead of the contact's own (or the
+// uncalibrated default); clamped like any other.
 [[nodiscard]] Rejection Lift(const FusionPatch& patch, const Eigen::Isometry3d& X_BL, const SurfaceContact& c,
-                             const LiftConfig& config, LiftedContact& out) noexcept;
+                             const LiftConfig& config, LiftedContact& out,
+                             const Eigen::Matrix2d* surface_cov_mm2 = nullptr) noexcept;
 
 // The 3x3 second-moment matrix, in the patch frame P (m^2), of a point uniform over the patch's surface about
 // its centre (Y = extent_y/2, R = extent_r/2), without the normal allowance. Used for unlocated contacts.

@@ -19,8 +19,10 @@
 // Everything here is pure and real-time safe (no allocation, no lock, no throw) except ValidateMount.
 #include <Eigen/Geometry>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "ruffini/patch/spec.h"
 #include "ruffini/robot/model.h"
@@ -58,5 +60,34 @@ struct PatchProjection {
 // the radius is finite and in (0, 1000] mm. Returns the link's index; throws InputError whose message
 // starts with `where` (e.g. "config/scenes/arm.yaml: patches[0].mount").
 std::size_t ValidateMount(const Model& model, const PatchMount& mount, std::string_view where);
+
+// The four edges of a patch's surface, in the order twin::EdgeEffects uses: Y = 0 (elbow), Y = extent_y,
+// R = 0, R = extent_r.
+enum class PatchEdge : std::uint8_t { kYMin = 0, kYMax = 1, kRMin = 2, kRMax = 3 };
+[[nodiscard]] const char* ToString(PatchEdge e) noexcept;
+
+// A mounted patch's surface, for finding seams.
+struct MountedSurface {
+  PatchMount mount;
+  double extent_y_mm = 150.0, extent_r_deg = 145.0;
+};
+
+// Two patches whose covers meet: edge_a of patch a continues into edge_b of patch b (indices into the list
+// given to FindSeams, a < b).
+struct Seam {
+  std::size_t a = 0, b = 0;
+  PatchEdge edge_a = PatchEdge::kRMax, edge_b = PatchEdge::kRMin;
+};
+
+// The seams among `patches`: a point 1 mm outside the middle of an edge of one patch that lies on another's
+// surface (same link, within 1 mm of its cylinder, inside its extent and within 2 mm of one of its edges: not
+// an overlap) makes a seam between that edge and the other's edge nearest the point (each pair of edges once,
+// a < b). Covers meeting across a joint (two links) are not seams here. The same test sim::EffectsFor uses to make the twin's edge `continued`.
+// Configure-time (allocates).
+[[nodiscard]] std::vector<Seam> FindSeams(std::span<const MountedSurface> patches);
+
+// Distance from a surface point to one edge of the patch, mm on the surface (arc length for R edges;
+// negative outside).
+[[nodiscard]] double DistanceToEdgeMm(const MountedSurface& p, PatchEdge edge, const patch::SurfacePoint& s) noexcept;
 
 }  // namespace ruffini::robot
