@@ -421,6 +421,83 @@ TEST_F(CoreStopRule, ACalibratedSdIsJudgedAndAnUncalibratedOneIsNot) {
   EXPECT_FLOAT_EQ(core.SafetyState().cause().force_n(), 1.3f);  // the cause carries the force as received
 }
 
+// The forearm seam (issue 16, docs/fusion.md "Seams"): one probe across it loads both patches and each decoder
+// reads its share; a contact that may lie on the seam is judged on the sum of both sides' newest forces.
+class CoreSeam : public CoreTest {
+ protected:
+  static aggregate::Setup WithSeams() {
+    aggregate::Setup s = CobotSetup();
+    std::vector<robot::MountedSurface> surfaces;
+    for (const auto& p : s.patches) surfaces.push_back({*p.mount, p.extent_y_mm, p.extent_r_deg});
+    for (const robot::Seam& seam : robot::FindSeams(surfaces)) s.seams.push_back({seam, 30.0, 30.0});
+    return s;
+  }
+  CoreSeam() : CoreTest(WithSeams()) {}
+  explicit CoreSeam(aggregate::Setup s) : CoreTest(std::move(s)) {}
+  // A located contact with a 2 mm sd on both axes.
+  v1::PatchMessage Located(float force_n, float y_mm, float r_deg, std::int64_t t_ns, bool released = false) const {
+    v1::PatchMessage m = ContactMsg(force_n, t_ns);
+    auto* c = m.mutable_contact();
+    c->set_located(true);
+    c->set_y_mm(y_mm);
+    c->set_r_deg(r_deg);
+    c->set_uncertainty_calibrated(true);
+    c->set_force_sd_n(0.1f);
+    c->set_cov_yy_mm2(4.0f);
+    c->set_cov_rr_mm2(4.0f);
+    c->set_onset(true);
+    c->set_released(released);
+    return m;
+  }
+};
+
+class CoreNoSeam : public CoreSeam {
+ protected:
+  CoreNoSeam() : CoreSeam(CobotSetup()) {}
+};
+
+TEST_F(CoreSeam, AProbeOnTheSeamIsJudgedOnBothSidesForces) {
+  ASSERT_EQ(setup.seams.size(), 1u);
+  ASSERT_EQ(setup.patches[setup.seams[0].seam.a].id, "forearm_a");
+  ASSERT_EQ(setup.patches[setup.seams[0].seam.b].id, "forearm_b");
+  const std::vector<int> streams = ClearAll();
+  // 0.9 N on each side, each placed about 10 mm inside its own patch: 1.8 N on the seam.
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR) << "one side alone: 0.9 N";
+  Send(streams[1], 1, Located(0.9f, 75, 15, tc + kMs), tc + kMs);
+  const auto st = core.SafetyState();
+  EXPECT_EQ(st.state(), v1::SafetyState::STATE_STOP);
+  EXPECT_EQ(st.cause().patch_id(), "forearm_b");
+  EXPECT_FLOAT_EQ(st.cause().force_n(), 1.8f);
+  EXPECT_EQ(core.counters().seam_sums, 1u);
+}
+
+TEST_F(CoreSeam, FarFromTheSeamLateOrReleasedTheSidesAreNotSummed) {
+  const std::vector<int> streams = ClearAll();
+  // forearm_b's contact 100 deg (65 mm) from the seam: two touches.
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  Send(streams[1], 1, Located(0.9f, 75, 100, tc + kMs), tc + kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  // On the seam but 10 ms apart (frame times): not one instant. (Heartbeats keep every patch live.)
+  Beat(streams, 10);
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  Send(streams[1], 1, Located(0.9f, 75, 15, tc + 10 * kMs), tc + 10 * kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  // The other side released: nothing to add.
+  Beat(streams, 10);
+  Send(streams[0], 0, Located(0.0f, 75, 130, tc, true), tc);
+  Send(streams[1], 1, Located(0.9f, 75, 15, tc + kMs), tc + kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  EXPECT_EQ(core.counters().seam_sums, 0u);
+}
+
+TEST_F(CoreNoSeam, WithoutBandsTheSidesAreJudgedAlone) {
+  const std::vector<int> streams = ClearAll();
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  Send(streams[1], 1, Located(0.9f, 75, 15, tc + kMs), tc + kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+}
+
 // Review finding 6: a second hello for a patch with a live, healthy stream is refused DUPLICATE_PATCH before
 // anything else is looked at, whatever it says (here: another spec), and changes nothing: the state stays
 // CLEAR, no epoch, the live link HEALTHY and its stream still served. Old code: the spec check came first,

@@ -28,6 +28,10 @@ struct SeamFrame {
   // The same frame through the plain gate (no seam rule), as before seams had bands.
   bool plain_fused = false;
   double plain_error_mm = NAN;
+  // What the aggregator's stop judges: the larger of the patches' own forces, and with the seam rule the sum
+  // of both sides' forces when both may lie on the seam (aggregate::Core::JudgeOnSeam).
+  double own_max_n = 0.0;
+  double judged_n = 0.0;
 };
 
 class SeamRig {
@@ -147,6 +151,17 @@ class SeamRig {
   SeamFrame Judge(const std::vector<fusion::PatchInput>& in, const Eigen::Vector3d& truth, fusion::FusionData& data) const {
     SeamFrame f;
     f.patches_in_contact = static_cast<int>(in.size());
+    double sum = 0.0;
+    for (const fusion::PatchInput& x : in) {
+      f.own_max_n = std::max(f.own_max_n, x.contact.force_n);
+      sum += x.contact.force_n;
+    }
+    f.judged_n = f.own_max_n;
+    const fusion::FusionConfig& fc = fuser_->config();
+    if (in.size() == 2 && !fc.seams.empty() &&
+        fusion::MayBeOnSeam(fc.seams[0], fc.patches[seam_.a], in.front().contact, fc.patches[seam_.b], in.back().contact, fc.lift)) {
+      f.judged_n = std::max(f.judged_n, sum);
+    }
     fuser_->Update(in, fk_.X_BL, data);
     for (const fusion::BodyContact& b : data.contacts()) {
       if (b.num_patches == 2) f.fused = true;

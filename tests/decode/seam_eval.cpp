@@ -72,7 +72,7 @@ int main(int argc, char** argv) {
     std::uniform_real_distribution<double> uy(15.0, 135.0), uoff(-6.0, 6.0), ulog(std::log(2.0), std::log(50.0));
     std::uniform_real_distribution<double> iy(30.0, 120.0), ir(40.0, 105.0);
     std::uint64_t k = 0;
-    int used = 0, one_sided = 0, fused_presses = 0, plain_fused_presses = 0, stopped = 0;
+    int used = 0, one_sided = 0, fused_presses = 0, plain_fused_presses = 0, stopped = 0, own_stops = 0, judged_stops = 0;
     long both_frames = 0, fused_frames = 0, plain_fused_frames = 0;
     std::vector<double> err, plain_err, force_ratio, fused_err, fused_ratio;
     for (int i = 0; i < presses; ++i) {
@@ -85,9 +85,11 @@ int main(int argc, char** argv) {
       }
       ++used;
       long both = 0, fused = 0, plain_fused = 0;
-      bool stop = false;
+      bool stop = false, own_stop = false, judged_stop = false;
       std::vector<double> press_err, press_plain;
       for (const testing::SeamFrame& fr : *frames) {
+        own_stop = own_stop || fr.own_max_n > threshold;
+        judged_stop = judged_stop || fr.judged_n > threshold;
         if (fr.patches_in_contact == 2) {
           ++both;
           fused += fr.fused;
@@ -110,6 +112,8 @@ int main(int argc, char** argv) {
       if (both > 0 && 2 * fused > both) ++fused_presses;
       if (both > 0 && 2 * plain_fused > both) ++plain_fused_presses;
       stopped += stop;
+      own_stops += own_stop;
+      judged_stops += judged_stop;
       if (std::getenv("SEAM_VERBOSE")) {
         std::fprintf(stderr, "probe Y %.1f off %+.1f mm %.1f N: %ld of %zu frames both, %ld fused\n", y, off, f, both,
                      frames->size(), fused);
@@ -141,6 +145,8 @@ int main(int argc, char** argv) {
     std::printf("| of it, over fused frames | %.2f (%.2f-%.2f) | |\n", Quantile(fused_ratio, 0.5), Quantile(fused_ratio, 0.1),
                 Quantile(fused_ratio, 0.9));
     std::printf("| probes with a located body contact above %.2f N | %d of %d | |\n", threshold, stopped, used);
+    std::printf("| probes that STOP: a patch's own force above %.2f N (hold frames) / with the seam sum (aggregate::Core) | %d (%.1f %%) / %d (%.1f %%) | |\n",
+                threshold, own_stops, Pct(own_stops, used), judged_stops, Pct(judged_stops, used));
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "seam_eval: %s\n", e.what());

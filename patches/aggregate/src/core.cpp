@@ -58,6 +58,24 @@ std::optional<safety::PatchFaultCode> FaultCode(int code) {
 
 }  // namespace
 
+namespace {
+
+fusion::SurfaceContact SurfaceOf(const v1::PatchContact& c) noexcept {
+  fusion::SurfaceContact s;
+  s.force_n = c.force_n();
+  s.force_sd_n = c.force_sd_n();
+  s.located = c.located();
+  s.y_mm = c.y_mm();
+  s.r_deg = c.r_deg();
+  s.cov_yy_mm2 = c.cov_yy_mm2();
+  s.cov_ys_mm2 = c.cov_yr_mm2();
+  s.cov_ss_mm2 = c.cov_rr_mm2();
+  s.uncertainty_calibrated = c.uncertainty_calibrated();
+  return s;
+}
+
+}  // namespace
+
 Core::Core(Setup setup, std::int64_t now_ns)
     : setup_(std::move(setup)), policy_(setup_.safety), data_(policy_, now_ns), start_ns_(now_ns) {
   if (setup_.patches.size() != setup_.safety.patches.size()) {
@@ -101,6 +119,36 @@ Core::Core(Setup setup, std::int64_t now_ns)
     fuser_.emplace(*setup_.robot, std::move(fc));
     fusion_data_ = std::make_unique<fusion::FusionData>();
     fusion_inputs_.reserve(setup_.patches.size());
+  }
+}
+
+// One probe across a seam loads both patches, and each decoder reads only its share (docs/fusion.md, "Seams"):
+// a contact that may lie on its seam while the other side's newest contact (at most seam_sum_window_ns apart,
+// not a doubt, not released) may too is judged on the sum of both forces. Only ever raises the force judged.
+void Core::JudgeOnSeam(std::size_t pi, std::int64_t t_ns, const v1::PatchContact& c, safety::Contact& sc) noexcept {
+  if (!fuser_ || !c.located() || !std::isfinite(c.force_n())) return;
+  const fusion::FusionConfig& fc = fuser_->config();
+  for (const fusion::FusionConfig::SeamBand& sb : fc.seams) {
+    if (sb.seam.a != pi && sb.seam.b != pi) continue;
+    const std::size_t pj = sb.seam.a == pi ? sb.seam.b : sb.seam.a;
+    const PatchLink& other = links_[pj];
+    if (other.stream < 0 || !other.in_contact || other.doubtful || !other.surface.located()) continue;
+    const float f_other = other.surface.force_n();
+    if (!std::isfinite(f_other) || f_other <= 0) continue;
+    const std::int64_t dt = other.contact.t_ns() - t_ns;
+    if (dt > setup_.seam_sum_window_ns || dt < -setup_.seam_sum_window_ns) continue;
+    const fusion::SurfaceContact mine = SurfaceOf(c), theirs = SurfaceOf(other.surface);
+    const bool on = sb.seam.a == pi ? fusion::MayBeOnSeam(sb, fc.patches[pi], mine, fc.patches[pj], theirs, fc.lift)
+                                    : fusion::MayBeOnSeam(sb, fc.patches[pj], theirs, fc.patches[pi], mine, fc.lift);
+    if (!on) continue;
+    const float sum = c.force_n() + f_other;
+    if (!(sum > sc.force_n)) continue;
+    sc.force_n = sum;
+    // Independent decoders: the variances add (0, not calibrated, unless both are).
+    sc.force_sd_n = c.uncertainty_calibrated() && other.surface.uncertainty_calibrated()
+                        ? std::sqrt(c.force_sd_n() * c.force_sd_n() + other.surface.force_sd_n() * other.surface.force_sd_n())
+                        : 0.0f;
+    ++counters_.seam_sums;
   }
 }
 
@@ -488,6 +536,7 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       link.surface = c;
       link.doubtful = !std::isfinite(c.force_n()) || c.force_n() < -setup_.safety.input.negative_force_tolerance_n;
       if (placed) sc.p_bc_m = std::array<double, 3>{body.p_bc_m().x(), body.p_bc_m().y(), body.p_bc_m().z()};
+      if (!link.doubtful && !c.released()) JudgeOnSeam(pi, m.t_ns(), c, sc);
       Note(policy_.OnContact(data_, id, sc, now_ns));
       break;
     }
@@ -696,18 +745,9 @@ v1::ContactSet Core::Contacts(std::int64_t now_ns) {
   for (std::size_t i = 0; i < links_.size(); ++i) {
     const PatchLink& link = links_[i];
     if (link.stream < 0 || !link.in_contact || link.doubtful) continue;
-    const v1::PatchContact& c = link.surface;
     fusion::PatchInput in;
     in.patch = i;
-    in.contact.force_n = c.force_n();
-    in.contact.force_sd_n = c.force_sd_n();
-    in.contact.located = c.located();
-    in.contact.y_mm = c.y_mm();
-    in.contact.r_deg = c.r_deg();
-    in.contact.cov_yy_mm2 = c.cov_yy_mm2();
-    in.contact.cov_ys_mm2 = c.cov_yr_mm2();
-    in.contact.cov_ss_mm2 = c.cov_rr_mm2();
-    in.contact.uncertainty_calibrated = c.uncertainty_calibrated();
+    in.contact = SurfaceOf(link.surface);
     fusion_inputs_.push_back(in);
   }
   fuser_->Update(fusion_inputs_, std::span<const Eigen::Isometry3d>(fk_latest_.X_BL.data(), fk_latest_.X_BL.size()),

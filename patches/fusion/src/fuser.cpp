@@ -135,6 +135,16 @@ double AcrossEdgeVariance(const SurfaceContact& c, robot::PatchEdge edge, const 
 
 }  // namespace
 
+bool MayBeOnSeam(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const SurfaceContact& ca,
+                 const FusionPatch& pb, const SurfaceContact& cb, const LiftConfig& lift) noexcept {
+  if (!(sb.band_a_mm > 0 && sb.band_b_mm > 0) || !ca.located || !cb.located) return false;
+  const double da = robot::DistanceToEdgeMm(SurfaceOf(pa), sb.seam.edge_a, {ca.y_mm, ca.r_deg});
+  const double db = robot::DistanceToEdgeMm(SurfaceOf(pb), sb.seam.edge_b, {cb.y_mm, cb.r_deg});
+  // NaN anywhere compares false: not on the seam.
+  return da - 2.0 * std::sqrt(AcrossEdgeVariance(ca, sb.seam.edge_a, lift)) <= sb.band_a_mm &&
+         db - 2.0 * std::sqrt(AcrossEdgeVariance(cb, sb.seam.edge_b, lift)) <= sb.band_b_mm;
+}
+
 // Seams (docs/fusion.md, "Seams"). A decoder trained on its patch's interior places a touch on the seam well
 // inside its own patch (edge locations are pulled inward), so the two patches' contacts of one probe across a
 // seam lie tens of mm apart, often with covariances that do not cover the gap, and the gate keeps them apart.
@@ -148,18 +158,12 @@ double AcrossEdgeVariance(const SurfaceContact& c, robot::PatchEdge edge, const 
 void Fuser::PlaceOnSeams(std::span<const Eigen::Isometry3d> X_BL, FusionData& data) const noexcept {
   for (const FusionConfig::SeamBand& sb : config_.seams) {
     const std::size_t a = sb.seam.a, b = sb.seam.b;
-    if (!(sb.band_a_mm > 0 && sb.band_b_mm > 0) || !data.have_[a] || !data.have_[b]) continue;
+    if (!data.have_[a] || !data.have_[b]) continue;
     const SurfaceContact& ca = data.input_[a];
     const SurfaceContact& cb = data.input_[b];
-    if (!ca.located || !cb.located) continue;
     const FusionPatch& pa = config_.patches[a];
     const FusionPatch& pb = config_.patches[b];
-    const double da = robot::DistanceToEdgeMm(SurfaceOf(pa), sb.seam.edge_a, {ca.y_mm, ca.r_deg});
-    const double db = robot::DistanceToEdgeMm(SurfaceOf(pb), sb.seam.edge_b, {cb.y_mm, cb.r_deg});
-    if (da - 2.0 * std::sqrt(AcrossEdgeVariance(ca, sb.seam.edge_a, config_.lift)) > sb.band_a_mm ||
-        db - 2.0 * std::sqrt(AcrossEdgeVariance(cb, sb.seam.edge_b, config_.lift)) > sb.band_b_mm) {
-      continue;
-    }
+    if (!MayBeOnSeam(sb, pa, ca, pb, cb, config_.lift)) continue;
     const double across_sd_mm = 0.5 * std::max(sb.band_a_mm, sb.band_b_mm);
     auto lift_onto_seam = [&](const FusionPatch& p, std::size_t i, robot::PatchEdge edge, const SurfaceContact& c,
                               LiftedContact& out) {

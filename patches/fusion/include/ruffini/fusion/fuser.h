@@ -65,6 +65,12 @@ struct FusionConfig {
   std::vector<SeamBand> seams;
 };
 
+// Both contacts may lie on their seam (docs/fusion.md, "Seams"): both located, each within its side's band of
+// the seam plus 2 sd of its own across it, and the seam has both bands. pa/ca are seam.a's, pb/cb seam.b's.
+// Real-time safe.
+[[nodiscard]] bool MayBeOnSeam(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const SurfaceContact& ca,
+                               const FusionPatch& pb, const SurfaceContact& cb, const LiftConfig& lift) noexcept;
+
 // One patch's contact at this instant. `patch` indexes FusionConfig::patches (Fuser::FindPatch).
 struct PatchInput {
   std::size_t patch = 0;
