@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -200,6 +201,46 @@ TEST(Temperature, TheInterrogatorShiftsEveryGratingByCoefficientTimesTemperature
   }
 }
 
+// Temperature fields (issue 17): a gradient along the patch and around it, building up with its time constant,
+// and the cover's thermal strain added to the bare grating's coefficient.
+TEST(Temperature, AFieldWarmsTheElbowEndAndOneSideAndBuildsUpWithItsTimeConstant) {
+  TwinEffects e;
+  TemperatureEffect te;
+  te.spread = 0.0;
+  te.coefficient_pm_per_c = 10.0;
+  te.strain_pm_per_c = 30.0;          // 40 pm/C in all: a grating in silicone
+  te.gradient_along_c = 4.0;          // Y = 0 is 4 C warmer than Y = extent
+  te.gradient_around_c = 2.0;         // R = 0 is 2 C warmer than R = 180
+  te.gradient_around_r_deg = 0.0;
+  te.gradient_tau_s = 100.0;
+  e.temperature = te;
+  const SkinTwin twin(fixtures::Spec(), e, {5.5});
+  InterrogatorSim sim(twin, 1);
+  Shifts zero{};
+  std::array<double, patch::kGratings> wl{};
+  std::uint32_t flags = 0;
+  const double extent_y = twin.spec().extent_y_mm;
+  for (const double t : {0.0, 100.0, 1e6}) {
+    sim.Read(t, zero, wl, flags);
+    const double s = t == 0.0 ? 0.0 : 1.0 - std::exp(-t / 100.0);
+    EXPECT_NEAR(te.GradientScale(t), s, 1e-12);
+    for (std::size_t i = 0; i < patch::kGratings; ++i) {
+      const patch::SurfacePoint& c = twin.grating_centres()[i];
+      const double dT = s * (4.0 * (0.5 - c.y_mm / extent_y) + 1.0 * std::cos(c.r_deg * std::numbers::pi / 180.0));
+      EXPECT_NEAR((wl[i] - twin.reference_wavelength_nm()[i]) * 1e3, 40.0 * dT, 1e-6) << "t " << t << " FBG " << i + 1;
+    }
+  }
+  // Not a common mode: at full strength the gratings' shifts spread over several pm.
+  sim.Read(1e6, zero, wl, flags);
+  double lo = 1e9, hi = -1e9;
+  for (std::size_t i = 0; i < patch::kGratings; ++i) {
+    const double d = (wl[i] - twin.reference_wavelength_nm()[i]) * 1e3;
+    lo = std::min(lo, d);
+    hi = std::max(hi, d);
+  }
+  EXPECT_GT(hi - lo, 100.0);
+}
+
 // ---------------------------------------------------------------------------------------------------
 // Scenes.
 
@@ -261,6 +302,15 @@ TEST_F(FieldSceneFiles, DefaultsComeFromTheStructs) {
   EXPECT_EQ(s.effects.temperature->triangle_period_s, TemperatureEffect{}.triangle_period_s);
   EXPECT_EQ(s.effects.temperature->period_s, TemperatureEffect{}.period_s);
   EXPECT_TRUE(s.effects.temperature->knots.empty());
+  EXPECT_EQ(s.effects.temperature->strain_pm_per_c, 0.0);
+  EXPECT_EQ(s.effects.temperature->gradient_along_c, 0.0);
+  const auto g = LoadScene(Scene("    temperature: {strain_pm_per_c: 30, gradient: {along_c: 3, around_c: 1.5, around_r_deg: 90, tau_s: 600}}\n"));
+  ASSERT_TRUE(g.effects.temperature);
+  EXPECT_EQ(g.effects.temperature->strain_pm_per_c, 30.0);
+  EXPECT_EQ(g.effects.temperature->gradient_along_c, 3.0);
+  EXPECT_EQ(g.effects.temperature->gradient_around_c, 1.5);
+  EXPECT_EQ(g.effects.temperature->gradient_around_r_deg, 90.0);
+  EXPECT_EQ(g.effects.temperature->gradient_tau_s, 600.0);
 }
 
 TEST_F(FieldSceneFiles, BadFieldEffectsAreNamedExactly) {
@@ -272,6 +322,11 @@ TEST_F(FieldSceneFiles, BadFieldEffectsAreNamedExactly) {
   EXPECT_NE(Error("    temperature: {knots: [{t_s: 0, c: 200}]}\n").find("'twin.effects.temperature.knots[0].c' (200) must lie inside -100..100"),
             std::string::npos)
       << Error("    temperature: {knots: [{t_s: 0, c: 200}]}\n");
+  EXPECT_NE(Error("    temperature: {gradient: {along_c: 3, hot: 1}}\n").find("hot"), std::string::npos)
+      << Error("    temperature: {gradient: {along_c: 3, hot: 1}}\n");
+  EXPECT_NE(Error("    temperature: {gradient: {tau_s: -1}}\n").find("'twin.effects.temperature.gradient.tau_s' (-1) must lie inside"),
+            std::string::npos)
+      << Error("    temperature: {gradient: {tau_s: -1}}\n");
   EXPECT_NE(Error("    temperature: {triangle: {period_s: 60}}\n").find("'twin.effects.temperature.triangle.rate_c_per_h'"),
             std::string::npos)
       << Error("    temperature: {triangle: {period_s: 60}}\n");

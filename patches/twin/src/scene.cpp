@@ -56,6 +56,14 @@ TwinEffects ReadEffects(YamlReader& e) {
     te.ramp_c_per_s = t->NumberOr("ramp_c_per_s", te.ramp_c_per_s, -10.0, 10.0);
     te.coefficient_pm_per_c = t->NumberOr("coefficient_pm_per_c", te.coefficient_pm_per_c, 0.0, 100.0);
     te.spread = t->NumberOr("spread", te.spread, 0.0, 0.5);
+    te.strain_pm_per_c = t->NumberOr("strain_pm_per_c", te.strain_pm_per_c, 0.0, 1000.0);
+    if (auto g = t->MapOr("gradient")) {
+      te.gradient_along_c = g->NumberOr("along_c", 0.0, -100.0, 100.0);
+      te.gradient_around_c = g->NumberOr("around_c", 0.0, -100.0, 100.0);
+      te.gradient_around_r_deg = g->NumberOr("around_r_deg", 0.0, -360.0, 360.0);
+      te.gradient_tau_s = g->NumberOr("tau_s", 0.0, 0.0, kBig);
+      g->Finish();
+    }
     if (auto tri = t->MapOr("triangle")) {
       te.triangle_rate_c_per_h = tri->Number("rate_c_per_h", -1000.0, 1000.0);
       te.triangle_period_s = tri->NumberOr("period_s", te.triangle_period_s, 1.0, kBig);

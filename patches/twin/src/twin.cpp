@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -119,7 +120,8 @@ SkinTwin::SkinTwin(const patch::PatchSpec& spec, const TwinEffects& effects, std
     const double u_pos_r = uniform(fab), u_pos_a = uniform(fab), u_wl = uniform(fab);
     gain_[i] = effects.gain_spread ? std::max(0.2, 1.0 + effects.gain_spread->sigma * n_gain) : 1.0;
     temp_coeff_[i] = effects.temperature
-                         ? effects.temperature->coefficient_pm_per_c * (1.0 + effects.temperature->spread * n_temp)
+                         ? effects.temperature->coefficient_pm_per_c * (1.0 + effects.temperature->spread * n_temp) +
+                               effects.temperature->strain_pm_per_c
                          : 0.0;
     centres_[i] = spec.gratings[i].centre;
     reference_nm_[i] = spec.gratings[i].wavelength_nm;
@@ -376,6 +378,13 @@ InterrogatorSim::InterrogatorSim(const SkinTwin& twin, std::uint64_t seed)
   const TwinEffects& e = twin.effects();
   const double sigma = e.noise ? e.noise->sigma_pm : 0.0;
   noise_pm_.fill(sigma);
+  if (e.temperature) {
+    const double extent_y = twin.spec().extent_y_mm;
+    for (std::size_t i = 0; i < patch::kGratings; ++i) {
+      const patch::SurfacePoint& c = twin.grating_centres()[i];
+      field_c_[i] = e.temperature->FieldC(c.y_mm / extent_y, c.r_deg);
+    }
+  }
   for (const FaultEffect& f : e.faults) {
     const auto i = static_cast<std::size_t>(f.grating - 1);
     if (f.kind == FaultEffect::Kind::kDead) {
@@ -412,6 +421,16 @@ double TemperatureEffect::AtC(double t) const noexcept {
   return c;
 }
 
+double TemperatureEffect::GradientScale(double t_s) const noexcept {
+  if (!(gradient_tau_s > 0.0)) return 1.0;
+  return t_s <= 0.0 ? 0.0 : 1.0 - std::exp(-t_s / gradient_tau_s);
+}
+
+double TemperatureEffect::FieldC(double y_frac, double r_deg) const noexcept {
+  return gradient_along_c * (0.5 - y_frac) +
+         0.5 * gradient_around_c * std::cos((r_deg - gradient_around_r_deg) * std::numbers::pi / 180.0);
+}
+
 double InterrogatorSim::TemperatureC(double t) const noexcept {
   const auto& te = twin_.effects().temperature;
   if (!te) return 0.0;
@@ -421,6 +440,7 @@ double InterrogatorSim::TemperatureC(double t) const noexcept {
 void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, patch::kGratings>& wl,
                            std::uint32_t& flags) noexcept {
   const double dt_c = TemperatureC(t_s);
+  const double field_scale = twin_.effects().temperature ? twin_.effects().temperature->GradientScale(t_s) : 0.0;
   const double band_pm = twin_.spec().fibre.band_half_width_nm * 1e3;
   const double window_min_nm = twin_.spec().interrogator.window_min_nm, window_max_nm = twin_.spec().interrogator.window_max_nm;
   const auto& ref = twin_.reference_wavelength_nm();
@@ -429,7 +449,7 @@ void InterrogatorSim::Read(double t_s, const Shifts& strain, std::array<double, 
     // Draw every random number every frame, whatever the effects, so streams stay aligned across scenes.
     const double n = normal_(rng_);
     const double u = uniform_(rng_);
-    double shift = strain[i] + tc[i] * dt_c + noise_pm_[i] * n;
+    double shift = strain[i] + tc[i] * (dt_c + field_scale * field_c_[i]) + noise_pm_[i] * n;
     if (dead_[i] || u < dropout_[i] || std::isnan(shift)) {
       wl[i] = std::numeric_limits<double>::quiet_NaN();
       flags |= kFlagPeakMissing;

@@ -63,9 +63,25 @@ struct TemperatureEffect {
   double triangle_rate_c_per_h = 0.0;
   double triangle_period_s = 3600.0;
   std::vector<TemperatureKnot> knots;
+  // A field across the patch on top of dT(t) (docs/twin.md, "Temperature fields"): grating i at (Y_i, R_i) sees
+  //   dT_i(t) = dT(t) + s(t) [gradient_along_c (1/2 - Y_i / extent_y) + gradient_around_c / 2 cos(R_i - R_warm)]
+  // with s(t) = 1 - exp(-t / gradient_tau_s) (0 s: s = 1 from the start): the elbow end warmer than the wrist
+  // end by gradient_along_c (a warm joint motor), and one side warmer than the other by gradient_around_c
+  // (sunlight, a lamp), both building up with the time constant.
+  double gradient_along_c = 0.0;
+  double gradient_around_c = 0.0;
+  double gradient_around_r_deg = 0.0;  // R_warm: where around the limb it is warmest
+  double gradient_tau_s = 0.0;
+  // Thermal strain: the cover's expansion carried into the fibre, pm/C added to the bare grating's
+  // coefficient_pm_per_c (0: a bare grating's response; a grating embedded in silicone measures several times it).
+  double strain_pm_per_c = 0.0;
 
-  // dT at time t. Real-time safe: no allocation, no lock, no throw.
+  // dT at time t (the uniform part). Real-time safe: no allocation, no lock, no throw.
   [[nodiscard]] double AtC(double t_s) const noexcept;
+  // The field's build-up s(t) in [0, 1]. Real-time safe.
+  [[nodiscard]] double GradientScale(double t_s) const noexcept;
+  // The field's part at (y_frac = Y / extent_y, r_deg) at full strength (s = 1), C.
+  [[nodiscard]] double FieldC(double y_frac, double r_deg) const noexcept;
 };
 
 // Viscoelastic silicone: creep under a held load, a different unloading path, and a residual after release

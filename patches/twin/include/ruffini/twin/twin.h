@@ -133,6 +133,7 @@ class InterrogatorSim {
   std::array<double, patch::kGratings> noise_pm_{};
   std::array<double, patch::kGratings> dropout_{};
   std::array<bool, patch::kGratings> dead_{};
+  std::array<double, patch::kGratings> field_c_{};  // the temperature field at each grating, full strength, C
 };
 
 // Splits one user seed into independent streams (SplitMix64), so adding a stream never shifts another.
