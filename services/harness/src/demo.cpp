@@ -700,6 +700,13 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
       log("seam: " + std::to_string(n_s) + " frames, median error " + Fmt("%.1f", med(seam)) + " mm (" +
           std::to_string(fused_s) + " from two patches); interior touch median error " + Fmt("%.1f", med(interior)) +
           " mm");
+      // The seam probe, located (issue 16): its two patches' contacts are one body contact on the seam.
+      Event e{"the seam probe's contacts (7.3 to 8.3 s)", "most located frames one body contact from both patches, "
+              "within 10 mm of the seam", 7.3, false, ""};
+      e.pass = n_s > 0 && 2 * fused_s > n_s && med(seam) <= 10.0;
+      e.observed = std::to_string(fused_s) + " of " + std::to_string(n_s) + " located frames from two patches, median error " +
+                   Fmt("%.1f", med(seam)) + " mm (docs/fusion.md, \"Seams\")";
+      record(e);
     }
   }
   int passed = 0;
