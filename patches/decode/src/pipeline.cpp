@@ -124,13 +124,11 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
   if (!(config_.quiet_release_pm >= 0 && config_.quiet_release_drop >= 0)) {
     throw InputError("pipeline: quiet_release_pm and quiet_release_drop must be >= 0");
   }
-  if (!(config_.implausible_misfit >= 0 && config_.implausible_misfit <= 1 && config_.implausible_max_n >= 0 &&
-        config_.implausible_max_n < 1e6 && config_.implausible_floor_pm >= 0 && config_.implausible_floor_pm < 1e3 &&
-        config_.implausible_smooth_s >= 0 && config_.implausible_smooth_s <= 10)) {
-    throw InputError("pipeline: implausible_misfit must be 0..1, implausible_max_n and implausible_floor_pm >= 0, "
-                     "implausible_smooth_s 0..10 s");
+  if (!(config_.faint_pm >= 0 && config_.faint_pm < 1e3 && config_.faint_max_n >= 0 && config_.faint_max_n < 1e6 &&
+        config_.faint_smooth_s >= 0 && config_.faint_smooth_s <= 10)) {
+    throw InputError("pipeline: faint_pm must be 0..1000 pm, faint_max_n >= 0, faint_smooth_s 0..10 s");
   }
-  const double smooth_frames = config_.implausible_smooth_s * config_.baseline.sample_rate_hz;
+  const double smooth_frames = config_.faint_smooth_s * config_.baseline.sample_rate_hz;
   smooth_alpha_ = smooth_frames > 1.0 ? static_cast<float>(1.0 - std::exp(-1.0 / smooth_frames)) : 1.0f;
 }
 
@@ -222,30 +220,19 @@ void Pipeline<Scalar>::RaiseForPair(const TouchVerdict& v, PipelineOutput& out) 
 }
 
 template <typename Scalar>
-bool Pipeline<Scalar>::Implausible(const ShiftsPm& shift, bool gate_open, Data& d) const noexcept {
-  if (!touches_ || !(config_.implausible_misfit > 0)) return false;
-  ShiftsPm s;
+bool Pipeline<Scalar>::Faint(const ShiftsPm& shift, Data& d) const noexcept {
+  if (!(config_.faint_pm > 0)) return false;
+  float peak = 0.0f;
   for (std::size_t i = 0; i < kGratings; ++i) {
     float& m = d.smooth_[i];
-    if (!std::isfinite(shift[i])) {
-      s[i] = shift[i];  // missing: left out of the fit, the smoothed value kept for its return
-      continue;
-    }
+    if (!std::isfinite(shift[i])) continue;  // missing: its smoothed value is kept (and still counts)
     m = d.smooth_primed_ && std::isfinite(m) ? m + smooth_alpha_ * (shift[i] - m) : shift[i];
-    s[i] = m;
   }
   d.smooth_primed_ = true;
-  if (!gate_open) return false;
-  double energy = 0.0;
-  int n = 0;
-  for (float v : s) {
-    if (!std::isfinite(v)) continue;
-    energy += static_cast<double>(v) * v;
-    ++n;
+  for (float m : d.smooth_) {
+    if (std::isfinite(m)) peak = std::max(peak, std::abs(m));
   }
-  if (n < 4) return false;  // too little to judge (the frame is decoded from the others)
-  const double floor = config_.implausible_floor_pm;
-  return touches_->Unexplained(s) > config_.implausible_misfit * (energy + n * floor * floor);
+  return peak < static_cast<float>(config_.faint_pm);
 }
 
 template <typename Scalar>
@@ -425,13 +412,13 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   out.force_n = o.force_n;
   d.gate_ = o.in_contact;
   d.open_run_ = o.in_contact ? d.open_run_ + 1 : 0;
-  // Shifts no single touch explains: flagged; below implausible_max_n no contact, and the gate counts as
-  // closed so the baseline keeps tracking (the error is absorbed instead of frozen in).
+  // Shifts a baseline error gives as well: flagged. With faint_refuse, below faint_max_n no contact, and the
+  // gate counts as closed so the baseline keeps tracking (the error is absorbed instead of frozen in).
   bool refused = false;
-  if (Implausible(shift, o.in_contact, d)) {
-    out.implausible = true;
-    ++d.counters_.implausible;
-    if (o.force_n < config_.implausible_max_n) {
+  if (Faint(shift, d) && o.in_contact) {
+    out.faint = true;
+    ++d.counters_.faint;
+    if (config_.faint_refuse && o.force_n < config_.faint_max_n) {
       refused = true;
       d.gate_ = false;
       d.open_run_ = 0;
