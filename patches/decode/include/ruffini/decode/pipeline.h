@@ -109,7 +109,7 @@ struct PipelineConfig {
   // such presses; off). A frame at or above faint_max_n is never refused: that mode never lowers a stop at a
   // threshold of faint_max_n or more (with sd_k <= 0). faint_pm 0: off. faint_pm is the smallest that
   // flags the review's probe (docs/experiments/one-grating.md).
-  double faint_pm = 1.5;
+  double faint_pm = 1.25;
   double faint_smooth_s = 0.1;
   bool faint_refuse = false;
   double faint_max_n = 1.0;
