@@ -8,7 +8,8 @@
 //        peaks missing)
 //     -> baseline (common mode removed, frozen exactly while the decoder's own gate is open; see baseline.h)
 //     -> plausibility of the shifts (baseline stale, a shift outside the range the model was calibrated on)
-//     -> the paper's networks (force CNN over a window, gated grid MLPs + NIP)
+//     -> the paper's networks (force CNN over a window, gated grid MLPs + NIP); a contact on shifts that all
+//        stay within faint_pm of the baseline is flagged `faint` (a baseline error reads the same)
 //     -> calibrated uncertainty (force sd, 2x2 position covariance on the surface)
 //
 // A frame that fails a check is invalid with one Reason and carries no force (0, never NaN); it is not fed
