@@ -151,6 +151,8 @@ void RegisterEvaluate(CLI::App& app) {
     double confirm_s = decode::PipelineConfig{}.contact_confirm_s;
     double quiet_pm = decode::PipelineConfig{}.quiet_release_pm;
     double quiet_drop = decode::PipelineConfig{}.quiet_release_drop;
+    double faint_pm = decode::PipelineConfig{}.faint_pm;
+    bool faint_refuse = decode::PipelineConfig{}.faint_refuse;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("evaluate", "Evaluate a model: decode as one stream, score honestly and as the paper did; write a report folder");
@@ -171,6 +173,11 @@ void RegisterEvaluate(CLI::App& app) {
   cmd->add_flag("--gate-freeze,!--no-gate-freeze", a->gate_freeze,
                   "The decoder's gate freezes the baseline (--no-gate-freeze: only large shifts do, the old tracker)")
       ->capture_default_str();
+  cmd->add_option("--faint-pm", a->faint_pm,
+                  "Flag a contact frame whose largest smoothed shift is below this (pm; 0: off; docs/decoders.md)")
+      ->check(CLI::Range(0.0, 100.0))->capture_default_str();
+  cmd->add_flag("--faint-refuse,!--no-faint-refuse", a->faint_refuse,
+                "A faint frame below faint_max_n is no contact, and the baseline keeps tracking")->capture_default_str();
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
     const ModelAndData md = LoadModelAndData(a->model, a->data, a->patch_spec);
@@ -190,6 +197,8 @@ void RegisterEvaluate(CLI::App& app) {
     pcfg.contact_confirm_s = a->confirm_s;
     pcfg.quiet_release_pm = a->quiet_pm;
     pcfg.quiet_release_drop = a->quiet_drop;
+    pcfg.faint_pm = a->faint_pm;
+    pcfg.faint_refuse = a->faint_refuse;
     const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", pcfg);
     const auto mask = eval::MaskOfIndentations(d, test);
     eval::Predictions pred;

@@ -12,6 +12,7 @@ void RegisterBenchAggregatorCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
 void RegisterResetCommand(CLI::App& app);
 void RegisterSoakCommand(CLI::App& app);
-void RegisterCoverageCommands(CLI::App& app);  // sensitivity, check-scene
+void RegisterCoverageCommands(CLI::App& app);
+void RegisterProbeCommand(CLI::App& app);      // grating-probe  // sensitivity, check-scene
 
 }  // namespace ruffini::cli

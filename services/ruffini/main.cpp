@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   ruffini::cli::RegisterResetCommand(app);
   ruffini::cli::RegisterSoakCommand(app);
   ruffini::cli::RegisterCoverageCommands(app);
+  ruffini::cli::RegisterProbeCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& e) {

@@ -124,6 +124,12 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
   if (!(config_.quiet_release_pm >= 0 && config_.quiet_release_drop >= 0)) {
     throw InputError("pipeline: quiet_release_pm and quiet_release_drop must be >= 0");
   }
+  if (!(config_.faint_pm >= 0 && config_.faint_pm < 1e3 && config_.faint_max_n >= 0 && config_.faint_max_n < 1e6 &&
+        config_.faint_smooth_s >= 0 && config_.faint_smooth_s <= 10)) {
+    throw InputError("pipeline: faint_pm must be 0..1000 pm, faint_max_n >= 0, faint_smooth_s 0..10 s");
+  }
+  const double smooth_frames = config_.faint_smooth_s * config_.baseline.sample_rate_hz;
+  smooth_alpha_ = smooth_frames > 1.0 ? static_cast<float>(1.0 - std::exp(-1.0 / smooth_frames)) : 1.0f;
 }
 
 template <typename Scalar>
@@ -211,6 +217,22 @@ void Pipeline<Scalar>::RaiseForPair(const TouchVerdict& v, PipelineOutput& out) 
   // The sd of what is now reported (a sum: both touches' in quadrature), never below the networks'.
   const double s = total ? std::hypot(sd[0], sd[1]) : (bound[0] >= bound[1] ? sd[0] : sd[1]);
   if (std::isfinite(out.force_sd_n)) out.force_sd_n = std::max(out.force_sd_n, static_cast<float>(s));
+}
+
+template <typename Scalar>
+bool Pipeline<Scalar>::Faint(const ShiftsPm& shift, Data& d) const noexcept {
+  if (!(config_.faint_pm > 0)) return false;
+  float peak = 0.0f;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    float& m = d.smooth_[i];
+    if (!std::isfinite(shift[i])) continue;  // missing: its smoothed value is kept (and still counts)
+    m = d.smooth_primed_ && std::isfinite(m) ? m + smooth_alpha_ * (shift[i] - m) : shift[i];
+  }
+  d.smooth_primed_ = true;
+  for (float m : d.smooth_) {
+    if (std::isfinite(m)) peak = std::max(peak, std::abs(m));
+  }
+  return peak < static_cast<float>(config_.faint_pm);
 }
 
 template <typename Scalar>
@@ -371,6 +393,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   if (!d.primed_) {
     decoder_.Reset(d.net_, &shift);  // as if this frame had been there for the whole window
     d.primed_ = true;
+    d.smooth_primed_ = false;
   }
   const DecodeOutput o = decoder_.Decode(shift, d.net_);
   out.missing = o.missing;
@@ -389,6 +412,18 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   out.force_n = o.force_n;
   d.gate_ = o.in_contact;
   d.open_run_ = o.in_contact ? d.open_run_ + 1 : 0;
+  // Shifts a baseline error gives as well: flagged. With faint_refuse, below faint_max_n no contact, and the
+  // gate counts as closed so the baseline keeps tracking (the error is absorbed instead of frozen in).
+  bool refused = false;
+  if (Faint(shift, d) && o.in_contact) {
+    out.faint = true;
+    ++d.counters_.faint;
+    if (config_.faint_refuse && o.force_n < config_.faint_max_n) {
+      refused = true;
+      d.gate_ = false;
+      d.open_run_ = 0;
+    }
+  }
   bool quiet = false;
   if (config_.quiet_release_pm > 0) {
     float peak = 0.0f;
@@ -401,8 +436,8 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
             (config_.quiet_release_drop <= 0 ||
              before >= static_cast<float>(config_.quiet_release_drop * config_.quiet_release_pm));
   }
-  const bool contact = o.in_contact && d.open_run_ > confirm_frames_ && !quiet;
-  if (quiet) out.force_n = 0.0f;
+  const bool contact = o.in_contact && d.open_run_ > confirm_frames_ && !quiet && !refused;
+  if (quiet || refused) out.force_n = 0.0f;
   if (contact && !d.contact_) ++d.counters_.onsets;
   d.contact_ = contact;
   out.in_contact = contact;

@@ -98,6 +98,14 @@ TouchCheck::Best TouchCheck::SearchPair(const ShiftsPm& shift, int other, int iy
   return best;
 }
 
+double TouchCheck::Unexplained(const ShiftsPm& shift) const noexcept {
+  const Best coarse = SearchOne(shift, 0, model_.ny - 1, 0, model_.nr - 1, kStride);
+  if (coarse.node < 0) return coarse.cost;
+  const int iy = coarse.node / model_.nr, ir = coarse.node % model_.nr;
+  const Best fine = SearchOne(shift, iy - kStride, iy + kStride, ir - kStride, ir + kStride, 1);
+  return std::min(coarse.cost, fine.cost);
+}
+
 Touch TouchCheck::Place(int node, double amplitude) const noexcept {
   return Touch{model_.y0_mm + (node / model_.nr) * model_.dy_mm, model_.r0_deg + (node % model_.nr) * model_.dr_deg,
                std::max(0.0, Force(amplitude))};
