@@ -104,12 +104,74 @@ Run Decode(const v1::DecoderModel& m, const patch::PatchSpec& spec, const datase
   return r;
 }
 
+// Dry run: a re-tare judged (never applied) every every_s through the whole hour, whatever the state, against
+// the true force in its window: what the rule would absorb if asked at any moment.
+struct Dry {
+  int windows = 0;
+  int pressed_at_level = 0, pressed_at_level_accepted = 0;   // true force >= level somewhere in the window
+  int light = 0, light_accepted = 0;                          // 20 mN < true max < level
+  int untouched = 0, untouched_refused = 0;                   // true max <= 20 mN
+  int moving = 0;
+  double accepted_max_true_n = 0;                             // the largest true force in an accepted window
+};
+
+Dry DryRun(const v1::DecoderModel& m, const patch::PatchSpec& spec, const dataset::Dataset& d, double level_n,
+           double every_s, double min_shift_pm) {
+  decode::PipelineConfig cfg;
+  cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
+  const decode::Pipeline<float> pipe(m, spec, cfg);
+  decode::Pipeline<float>::Data data(pipe);
+  decode::RetareConfig rc;
+  rc.min_force_n = level_n;
+  rc.min_shift_pm = min_shift_pm;
+  decode::Retare retare(m.has_response() ? &m.response() : nullptr, cfg.baseline, rc);
+  const double dt = 1.0 / d.info.sample_rate_hz;
+  Dry r;
+  double next_s = every_s, window_max_true = 0;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double t = static_cast<double>(k) * dt;
+    Wavelengths wl;
+    for (std::size_t i = 0; i < kGratings; ++i) wl[i] = d.wavelength_nm[k][i];
+    const decode::PipelineOutput o = pipe.Process(wl, d.flags[k], data);
+    const float truth = d.true_force_n[k];
+    if (retare.active()) {
+      window_max_true = std::max(window_max_true, static_cast<double>(truth));
+      const auto res = retare.Feed(wl, o, data.baseline());
+      if (!res) continue;
+      if (res->outcome == decode::RetareOutcome::kMoving) {
+        ++r.moving;
+        continue;
+      }
+      if (res->outcome != decode::RetareOutcome::kAccepted && res->outcome != decode::RetareOutcome::kPressing) continue;
+      const bool accepted = res->outcome == decode::RetareOutcome::kAccepted;
+      ++r.windows;
+      if (window_max_true >= level_n) {
+        ++r.pressed_at_level;
+        r.pressed_at_level_accepted += accepted ? 1 : 0;
+      } else if (window_max_true > 0.02) {
+        ++r.light;
+        r.light_accepted += accepted ? 1 : 0;
+      } else {
+        ++r.untouched;
+        r.untouched_refused += accepted ? 0 : 1;
+      }
+      if (accepted) r.accepted_max_true_n = std::max(r.accepted_max_true_n, window_max_true);
+    } else if (t >= next_s && data.baseline().state() != decode::BaselineTracker::State::kCapturing) {
+      next_s = t + every_s;
+      retare.Start();
+      window_max_true = truth;
+    }
+  }
+  return r;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string model_path;
   double level_n = 0.75, every_s = 10.0, threshold_n = 1.5, min_shift_pm = decode::RetareConfig{}.min_shift_pm;
   std::vector<std::string> files;
+  bool dry = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -124,10 +186,11 @@ int main(int argc, char** argv) {
     else if (a == "--every-s") every_s = std::stod(next());
     else if (a == "--threshold-n") threshold_n = std::stod(next());
     else if (a == "--min-shift-pm") min_shift_pm = std::stod(next());
+    else if (a == "--dry-run") dry = true;
     else files.push_back(a);
   }
   if (model_path.empty() || files.empty()) {
-    std::fprintf(stderr, "usage: retare_eval --model M.rmodel [--level-n N] [--every-s S] [--threshold-n N] [--min-shift-pm P] DATA.h5...\n");
+    std::fprintf(stderr, "usage: retare_eval --model M.rmodel [--level-n N] [--every-s S] [--threshold-n N] [--min-shift-pm P] [--dry-run] DATA.h5...\n");
     return 2;
   }
   const v1::DecoderModel m = decode::LoadModel(model_path);
@@ -135,6 +198,20 @@ int main(int argc, char** argv) {
   std::printf("model %s (response map: %s), level %.2f N, min shift %.2f pm, operator every %.0f s while stale, "
               "threshold %.2f N\n\n",
               model_path.c_str(), m.has_response() ? "yes" : "no", level_n, min_shift_pm, every_s, threshold_n);
+  if (dry) {
+    std::printf("dry run: a re-tare judged every %.0f s through each hour (never applied); windows by the true force in them\n\n", every_s);
+    std::printf("| data | windows judged | true >= level: refused / all | light (20 mN..level): accepted / all | "
+                "untouched: refused / all | moving | largest true force accepted N |\n|---|---|---|---|---|---|---|\n");
+    for (const auto& f : files) {
+      const dataset::Dataset d = dataset::ReadDataset(f);
+      const Dry r = DryRun(m, spec, d, level_n, every_s, min_shift_pm);
+      std::printf("| %s | %d | %d / %d | %d / %d | %d / %d | %d | %.2f |\n", f.substr(f.rfind('/') + 1).c_str(), r.windows,
+                  r.pressed_at_level - r.pressed_at_level_accepted, r.pressed_at_level, r.light_accepted, r.light,
+                  r.untouched_refused, r.untouched, r.moving, r.accepted_max_true_n);
+      std::fflush(stdout);
+    }
+    return 0;
+  }
   std::printf("| data | hours | stale min (no cause) shipped | longest stale s | stale min (no cause) with re-tare | "
               "longest stale s | requests | accepted | pressing (pressed / nothing) | moving | invalid | "
               "accepted while pressed (max true N) | max judged N accepted | lightest press refused N |\n");
