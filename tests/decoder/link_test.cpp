@@ -56,6 +56,7 @@ class ScriptedPipeline final : public link::FramePipeline {
     for (std::size_t i = 0; i < kGratings; ++i) w[i] = 1530.0 + 3.0 * static_cast<double>(i);
     tracker.Seed(w);
   }
+  void Retare(const Wavelengths& baseline_nm) noexcept override { tracker.Seed(baseline_nm); }
   decode::PipelineOutput Process(const Wavelengths&, std::uint32_t) noexcept override {
     ++c.frames;
     decode::PipelineOutput o = fallback;
