@@ -203,6 +203,24 @@ TEST(Retare, AStaleBaselineRecoversAfterTheReleaseNotDuringThePress) {
   EXPECT_GT(st.Press(75.0, 72.5, 1.0), 0.8f) << "the press after the re-tare decodes as before";
 }
 
+// A press that starts inside the window (here at an edge, where 1.5 N moves no grating by the 3 pm capture
+// tolerance, so the window is not `moving`) is judged at its force at the window's end, not at the window's
+// mean (a quarter of it): refused. (Found on the field hours: docs/experiments/retare.md.)
+TEST(Retare, APressStartingInsideTheWindowIsRefused) {
+  const double y = 16.0, r = 30.0, f = 1.5;
+  EXPECT_LT(MaxShiftPm(y, r, f), 3.0);
+  Stream st;
+  st.Run(150);
+  ASSERT_TRUE(st.retare().Start());
+  const int n = st.data().baseline().config().capture_frames;
+  for (int k = 0; k < n && st.retare().active(); ++k) {
+    const int into = k - (n - 25);  // the last 25 frames: a 50 ms ramp, then held
+    st.Step(y, r, into < 0 ? 0.0 : f * std::min(1.0, (into + 1) / 5.0));
+  }
+  ASSERT_TRUE(st.last().has_value());
+  EXPECT_NE(st.last()->outcome, RetareOutcome::kAccepted) << st.last()->force_n;
+}
+
 // What the rule lets through, stated: at a place the gratings barely see, a press moves no grating by
 // min_shift_pm, and the re-tare absorbs it. There the networks read it as almost nothing too (the skin is
 // blind there: docs/safety.md "Re-tare").

@@ -148,6 +148,11 @@ Dry DryRun(const v1::DecoderModel& m, const patch::PatchSpec& spec, const datase
       if (window_max_true >= level_n) {
         ++r.pressed_at_level;
         r.pressed_at_level_accepted += accepted ? 1 : 0;
+        if (accepted && std::getenv("RETARE_VERBOSE") != nullptr) {
+          const std::size_t k0 = k + 1 - static_cast<std::size_t>(res->frames);
+          std::fprintf(stderr, "dry t %.1f accepted with a press: true %.2f..%.2f N (max %.2f) at (%.1f, %.1f); judged %.2f\n",
+                       t, d.true_force_n[k0], truth, window_max_true, d.y_mm[k], d.r_deg[k], res->force_n);
+        }
       } else if (window_max_true > 0.02) {
         ++r.light;
         r.light_accepted += accepted ? 1 : 0;

@@ -95,6 +95,9 @@ bool Retare::Start() noexcept {
   count_.fill(0);
   shift_sum_pm_.fill(0.0);
   shift_count_.fill(0);
+  head_sum_pm_.fill(0.0);
+  head_count_.fill(0);
+  tail_pm_.fill(std::numeric_limits<float>::quiet_NaN());
   return true;
 }
 
@@ -154,6 +157,8 @@ std::optional<RetareResult> Retare::Feed(const Wavelengths& wl, const PipelineOu
       for (std::size_t i = 0; i < kGratings; ++i) s[i] -= baseline_.thermal_ratio[i] * cm;
     }
   }
+  const int tenth = std::max(1, baseline_.capture_frames / 10);
+  const float alpha = 1.0f / static_cast<float>(tenth);
   for (std::size_t i = 0; i < kGratings; ++i) {
     if (std::isfinite(wl[i])) {
       sum_nm_[i] += wl[i];
@@ -162,6 +167,11 @@ std::optional<RetareResult> Retare::Feed(const Wavelengths& wl, const PipelineOu
     if (std::isfinite(s[i])) {
       shift_sum_pm_[i] += s[i];
       ++shift_count_[i];
+      if (frames_ <= tenth) {
+        head_sum_pm_[i] += s[i];
+        ++head_count_[i];
+      }
+      tail_pm_[i] = std::isfinite(tail_pm_[i]) ? tail_pm_[i] + alpha * (s[i] - tail_pm_[i]) : s[i];
     }
   }
   if (frames_ < baseline_.capture_frames) return std::nullopt;
@@ -174,7 +184,16 @@ std::optional<RetareResult> Retare::Feed(const Wavelengths& wl, const PipelineOu
     mean[i] = 2 * shift_count_[i] >= frames_ ? static_cast<float>(shift_sum_pm_[i] / shift_count_[i])
                                              : std::numeric_limits<float>::quiet_NaN();
   }
+  ShiftsPm head;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    head[i] = head_count_[i] > 0 ? static_cast<float>(head_sum_pm_[i] / head_count_[i]) : std::numeric_limits<float>::quiet_NaN();
+  }
+  // The largest force of the three judgements (the window, its start, its end).
   RetareResult r = judge_->Judge(mean);
+  for (const ShiftsPm* part : {&head, &tail_pm_}) {
+    const RetareResult p = judge_->Judge(*part);
+    if (p.force_n > r.force_n) r = p;
+  }
   active_ = false;
   r.motion_pm = motion_pm_;
   r.frames = frames_;

@@ -11,7 +11,9 @@
 //      or kPressing for an over-range frame (more load than the model knows);
 //   2. every present peak stays within capture_tolerance_pm of its running mean (the start-up capture's
 //      rule): else kMoving; and
-//   3. no single touch anywhere on the response map explains the window's mean shift against the OLD
+//   3. no single touch anywhere on the response map explains the window's mean shift (nor the mean of its
+//      first tenth, nor a moving average over its last tenth: a press starting or ending inside the window)
+//      against the OLD
 //      baseline (common mode removed) with a force at or above min_force_n while moving some grating by at
 //      least min_shift_pm: at every node the touch's amplitude is the least-squares projection of the
 //      shift on the node's response (a press pushes: only positive amplitudes count), its force F from
@@ -120,6 +122,11 @@ class Retare {
   std::array<int, kGratings> count_{};
   std::array<double, kGratings> shift_sum_pm_{};
   std::array<int, kGratings> shift_count_{};
+  // The window's first tenth (its mean) and its last frames (a moving average over a tenth of the window):
+  // a press starting or ending inside the window is judged at its full force there, not at the window's mean.
+  std::array<double, kGratings> head_sum_pm_{};
+  std::array<int, kGratings> head_count_{};
+  ShiftsPm tail_pm_{};
 };
 
 }  // namespace ruffini::decode
