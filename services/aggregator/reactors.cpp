@@ -349,8 +349,7 @@ grpc::ServerUnaryReactor* AggregatorServer::Impl::RetarePatch(grpc::CallbackServ
       *response = std::move(d.response);
     }
     stats.retare_requests[static_cast<std::size_t>(response->reason())].fetch_add(1);
-    if (!authorized) {
-      stats.auth_reset_not_operator.fetch_add(1);
+    if (!authorized) {  // counted in ruffini_aggregator_retare_requests_total{result="unauthorized"}
       spdlog::warn("RetarePatch refused (UNAUTHORIZED) for {} '{}' from {}: only an operator may ask", service::RoleName(who.role),
                    who.id, peer);
     }
