@@ -90,6 +90,9 @@ void AggregatorServer::Impl::CopyStats() {
     stats.hellos_refused[r].store(c.hellos_refused[r], std::memory_order_relaxed);
   }
   stats.protocol_errors = c.protocol_errors;
+  for (std::size_t r = 0; r < stats.retare_results.size() && r < c.retare_results.size(); ++r) {
+    stats.retare_results[r].store(c.retare_results[r], std::memory_order_relaxed);
+  }
   for (std::size_t i = 0; i <= stats.patch_ids.size(); ++i) {
     const channel::ErrorCounts& ec = i < stats.patch_ids.size() ? core->link_errors()[i] : core->link_errors_unbound();
     for (std::size_t e = 0; e < channel::kErrorKinds; ++e) {

@@ -70,6 +70,37 @@ class StatsCollectable final : public prometheus::Collectable {
       }
       out.push_back(std::move(f));
     }
+    {
+      // RetarePatch requests: sent, or refused by reason (the contract's RetareRefusal, lower case); and the
+      // decoders' results by outcome (RetareOutcome, lower case).
+      auto lower = [](std::string text, std::size_t prefix) {
+        text = text.substr(prefix);
+        for (char& ch : text) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+        return text;
+      };
+      MetricFamily f{"ruffini_aggregator_retare_requests_total", "RetarePatch requests: sent, or refused by reason.",
+                     MetricType::Counter, {}};
+      for (int r = v1::RetareRefusal_MIN; r <= v1::RetareRefusal_MAX; ++r) {
+        if (!v1::RetareRefusal_IsValid(r)) continue;
+        ClientMetric m;
+        m.label.push_back({"result", r == 0 ? std::string("sent")
+                                            : lower(v1::RetareRefusal_Name(static_cast<v1::RetareRefusal>(r)),
+                                                    sizeof("RETARE_REFUSAL_") - 1)});
+        m.counter.value = u(s_.retare_requests[static_cast<std::size_t>(r)]);
+        f.metric.push_back(std::move(m));
+      }
+      out.push_back(std::move(f));
+      MetricFamily g{"ruffini_aggregator_retare_results_total", "Re-tare results from the decoders, by outcome.",
+                     MetricType::Counter, {}};
+      for (int o = v1::RetareOutcome_MIN + 1; o <= v1::RetareOutcome_MAX; ++o) {
+        if (!v1::RetareOutcome_IsValid(o)) continue;
+        ClientMetric m;
+        m.label.push_back({"outcome", lower(v1::RetareOutcome_Name(static_cast<v1::RetareOutcome>(o)), sizeof("RETARE_OUTCOME_") - 1)});
+        m.counter.value = u(s_.retare_results[static_cast<std::size_t>(o)]);
+        g.metric.push_back(std::move(m));
+      }
+      out.push_back(std::move(g));
+    }
     one("ruffini_aggregator_protocol_errors_total", "Connect streams ended for a protocol error.", MetricType::Counter,
         u(s_.protocol_errors));
     {

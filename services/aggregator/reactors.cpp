@@ -23,6 +23,10 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
         std::lock_guard ender_lock(guard->mu);
         if (guard->alive) self->FinishOnce(grpc::Status(grpc::StatusCode::ABORTED, "replaced by a new stream for its patch"));
       };
+      impl->stream_senders[self->stream_] = [self, guard](const v1::AggregatorCommand& c) {
+        std::lock_guard sender_lock(guard->mu);
+        if (guard->alive) self->Send(c);
+      };
     });
     StartRead(&in_);
   }
@@ -64,6 +68,13 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
         spdlog::info("patch {} connected from {} ({})", reply.command->hello_accepted().patch_id(), self->peer_,
                      m.hello().decoder_instance());
       }
+      if (m.has_retare_result()) {
+        const v1::RetareResult& r = m.retare_result();
+        spdlog::warn("patch {}: re-tare {} {} (one touch explains {:.2f} N at ({:.1f} mm, {:.1f} deg); re-tare force "
+                     "{:.2f} N; motion {:.2f} pm)",
+                     m.patch_id(), r.request_id(), v1::RetareOutcome_Name(r.outcome()), r.force_n(), r.y_mm(), r.r_deg(),
+                     r.min_force_n(), r.motion_pm());
+      }
     });
     StartRead(&in_);
   }
@@ -96,6 +107,7 @@ class ConnectReactor final : public grpc::ServerBidiReactor<v1::PatchMessage, v1
     }
     impl->Post([impl, stream] {
       impl->stream_enders.erase(stream);
+      impl->stream_senders.erase(stream);
       impl->core->CloseStream(stream, impl->Now());
     });
     delete this;
@@ -310,6 +322,39 @@ grpc::ServerUnaryReactor* AggregatorServer::Impl::ResetStop(grpc::CallbackServer
       stats.resets_refused.fetch_add(1);
       spdlog::warn("ResetStop refused from {} ({}): {}", peer, request->operator_name(), response->message());
     }
+    reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* AggregatorServer::Impl::RetarePatch(grpc::CallbackServerContext* ctx,
+                                                              const v1::RetarePatchRequest* request,
+                                                              v1::RetarePatchResponse* response) {
+  auto* reactor = ctx->DefaultReactor();
+  const std::string peer = ctx->peer();
+  // Authorised like ResetStop: only an operator (a plaintext server treats every caller as one).
+  const service::Identity who = service::CallerIdentity(*ctx, config.tls.insecure);
+  const bool authorized = who.role == service::Role::kOperator || who.role == service::Role::kAny;
+  Post([this, reactor, request, response, peer, authorized, who] {
+    if (shut_down) {
+      response->set_sent(false);
+      response->set_reason(v1::RETARE_REFUSAL_SHUTTING_DOWN);
+      response->set_message("the aggregator is shutting down");
+    } else {
+      auto d = core->OnRetare(*request, authorized, Now());
+      if (d.command) {
+        auto it = stream_senders.find(d.stream);
+        if (it != stream_senders.end()) it->second(*d.command);
+      }
+      *response = std::move(d.response);
+    }
+    stats.retare_requests[static_cast<std::size_t>(response->reason())].fetch_add(1);
+    if (!authorized) {  // counted in ruffini_aggregator_retare_requests_total{result="unauthorized"}
+      spdlog::warn("RetarePatch refused (UNAUTHORIZED) for {} '{}' from {}: only an operator may ask", service::RoleName(who.role),
+                   who.id, peer);
+    }
+    spdlog::warn("RetarePatch {} from {} ({}, \"{}\"): {}", response->sent() ? "sent" : "refused", peer,
+                 request->operator_name(), request->operator_note(), response->message());
     reactor->Finish(grpc::Status::OK);
   });
   return reactor;

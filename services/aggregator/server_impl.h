@@ -183,6 +183,9 @@ struct Stats {
   std::atomic<std::uint64_t> stop_epoch{1}, seq{0}, stops{0}, faults{0}, resets_accepted{0}, resets_refused{0};
   std::atomic<std::uint64_t> messages{0}, hellos_accepted{0}, protocol_errors{0};
   std::array<std::atomic<std::uint64_t>, v1::HelloRefusal_ARRAYSIZE> hellos_refused{};  // by v1::HelloRefusal
+  // RetarePatch: [0] sent, else refused by v1::RetareRefusal; the decoders' results by v1::RetareOutcome.
+  std::array<std::atomic<std::uint64_t>, v1::RetareRefusal_ARRAYSIZE> retare_requests{};
+  std::array<std::atomic<std::uint64_t>, v1::RetareOutcome_ARRAYSIZE> retare_results{};
   std::atomic<std::uint64_t> joint_accepted{0}, joint_rejected{0};
   std::atomic<std::uint64_t> subscriber_drops{0};
   // Refused for who the caller is (docs/security.md): an RPC its role may not call, a hello for another
@@ -275,6 +278,8 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
   void Loop();
   // The Core's takeover: Finish the replaced stream's call (its reactor, if still there). Loop thread.
   std::map<int, std::function<void()>> stream_enders;
+  // A command on a live Connect stream (RetarePatch): its reactor's Send, while the reactor lives. Loop thread.
+  std::map<int, std::function<void(const v1::AggregatorCommand&)>> stream_senders;
   void EndStream(int stream) {
     auto it = stream_enders.find(stream);
     if (it == stream_enders.end()) return;
@@ -304,6 +309,8 @@ struct AggregatorServer::Impl final : v1::Aggregator::CallbackService {
                                                           const v1::WatchContactsRequest* request) override;
   grpc::ServerUnaryReactor* ResetStop(grpc::CallbackServerContext* ctx, const v1::ResetStopRequest* request,
                                       v1::ResetStopResponse* response) override;
+  grpc::ServerUnaryReactor* RetarePatch(grpc::CallbackServerContext* ctx, const v1::RetarePatchRequest* request,
+                                        v1::RetarePatchResponse* response) override;
   grpc::ServerUnaryReactor* GetStatus(grpc::CallbackServerContext* ctx, const v1::GetStatusRequest* request,
                                       v1::AggregatorStatus* response) override;
 };

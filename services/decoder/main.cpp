@@ -45,6 +45,13 @@ int main(int argc, char** argv) {
                  "A frame or message older than this in the decoder's own queues is dropped and reported, ms "
                  "(docs/safety-channel.md)")
       ->capture_default_str();
+  app.add_option("--retare-force-n", config.retare_force_n,
+                 "Re-tare: refuse when one touch explains the shifts with at least this force, N (0: half the "
+                 "patch's region threshold; docs/safety.md \"Re-tare\")")
+      ->capture_default_str();
+  app.add_option("--max-frozen-s", config.max_frozen_s,
+                 "The baseline's staleness limit, s (0: the default, 300 s). For tests: a stale baseline in seconds")
+      ->capture_default_str();
   app.add_option("--ports-file", ports_file, "Write the chosen metrics port here ('metrics P')");
   auto* tls_opt = app.add_option("--tls-dir", config.tls_dir,
                                  "Mutual TLS: DIR/ca.crt, DIR/decoder-PATCH.crt and DIR/decoder-PATCH.key (docs/security.md)")

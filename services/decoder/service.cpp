@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <boost/asio.hpp>
 #include <boost/lockfree/spsc_queue.hpp>
 #include <chrono>
@@ -25,6 +26,8 @@
 #include "ruffini/channel/crc.h"
 #include "ruffini/link/to_proto.h"
 #include "ruffini/twin/scene.h"
+#include "ruffini/safety/scene.h"
+#include "ruffini/scene_file.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "stats.h"
 
@@ -260,6 +263,7 @@ struct DecoderService::Impl {
   v1::DecoderModel model;
   link::DecoderChoice choice;
   decode::PipelineConfig pipeline_config;
+  decode::RetareConfig retare;
   std::unique_ptr<link::FramePipeline> pipeline;
   link::MonitorConfig monitor_config;
   std::unique_ptr<link::Monitor> monitor;
@@ -281,6 +285,10 @@ struct DecoderService::Impl {
   std::shared_ptr<grpc::Channel> channel_to_aggregator;
   std::mutex ctx_mutex;
   grpc::ClientContext* live_ctx = nullptr;  // the publisher's current stream (to cancel it on Stop)
+  // Re-tare requests: the publisher's reader stores the newest request id, the decode thread takes it.
+  std::atomic<std::uint64_t> retare_request{0};
+  std::mutex retare_mutex;           // the publisher's reader: the last id taken, per aggregator run
+  std::uint64_t retare_run = 0, retare_last_id = 0;
   // The safety layer (docs/safety-channel.md): this process's run id and the freshness budget.
   const std::uint64_t run_id = ruffini::channel::DrawRunId();
   std::int64_t freshness_budget_ns = 20'000'000;
@@ -306,6 +314,7 @@ void DecoderService::Impl::CopyStats() {
   stats.active_fault.store(static_cast<int>(h.active_fault), std::memory_order_relaxed);
   stats.healthy.store(h.healthy, std::memory_order_relaxed);
   stats.in_contact.store(h.in_contact, std::memory_order_relaxed);
+  for (std::size_t i = 0; i < monitor->retares().size(); ++i) st(stats.retares[i], monitor->retares()[i]);
   stats.drift_pm.store(h.drift_pm, std::memory_order_relaxed);
   stats.common_mode_pm.store(h.common_mode_pm, std::memory_order_relaxed);
 }
@@ -346,6 +355,10 @@ void DecoderService::Impl::DecodeLoop() {
       dropped_seen = dropped;
     }
     mon.OnMessagesDropped(sink->TakeDropped());
+    if (const std::uint64_t id = retare_request.exchange(0, std::memory_order_acq_rel); id != 0) {
+      stats.retare_requests.fetch_add(1, std::memory_order_relaxed);
+      mon.RequestRetare(id, now, *sink);
+    }
     mon.Tick(now, *sink);
     sink->Flush();
     // Metrics need not follow every frame: copying them once a millisecond keeps the per-frame cost down.
@@ -418,6 +431,22 @@ bool DecoderService::Impl::PublishOneStream() {
                       v1::HelloRefusal_Name(cmd.hello_refused().reason()), cmd.hello_refused().message());
       } else if (cmd.has_resend_hello()) {
         resend = true;
+      } else if (cmd.has_retare()) {
+        // Only on a stream whose hello was accepted (the command names no run of its own: the stream is the
+        // aggregator's, mutual TLS says whose). Ids rise per aggregator run: a repeated or older one is
+        // ignored (a duplicate never starts a second re-tare).
+        const std::uint64_t run = aggregator_run.load(), id = cmd.retare().request_id();
+        std::lock_guard lock(retare_mutex);
+        if (!accepted.load() || id == 0 || (run == retare_run && id <= retare_last_id)) {
+          stats.retare_repeated.fetch_add(1, std::memory_order_relaxed);
+          spdlog::warn("aggregator {}: re-tare request {} ignored (repeated, or before the hello was accepted)",
+                       config.aggregator.str(), id);
+        } else {
+          retare_run = run;
+          retare_last_id = id;
+          retare_request.store(id, std::memory_order_release);
+          spdlog::warn("aggregator {}: re-tare {} asked by '{}'", config.aggregator.str(), id, cmd.retare().operator_name());
+        }
       }
     }
     reader_done = true;
@@ -590,6 +619,25 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
     throw InputError("--heartbeat-ms " + std::to_string(s.config.heartbeat_ms) + ": expected above 0, at most 1000");
   }
   s.pipeline_config.baseline = decode::BaselineFor(s.model, s.config.rate_hz);
+  if (!(s.config.max_frozen_s >= 0.0 && s.config.max_frozen_s <= 86400.0)) {
+    throw InputError("--max-frozen-s " + std::to_string(s.config.max_frozen_s) + ": expected 0 (the default) to 86400");
+  }
+  if (s.config.max_frozen_s > 0.0) s.pipeline_config.baseline.max_frozen_s = s.config.max_frozen_s;
+  // The re-tare force: half the smallest threshold of the patch's region, unless given.
+  s.retare.min_force_n = 0.75;
+  if (s.config.retare_force_n > 0.0) {
+    s.retare.min_force_n = s.config.retare_force_n;
+  } else if (s.config.retare_force_n < 0.0 || !std::isfinite(s.config.retare_force_n)) {
+    throw InputError("--retare-force-n " + std::to_string(s.config.retare_force_n) + ": expected a force above 0 (or 0: the default)");
+  } else if (const SceneFile file = LoadSceneFile(s.config.scene_path); file.safety) {
+    const safety::Config sc = safety::ConfigFromScene(file);
+    for (const auto& p : sc.patches) {
+      if (p.id != s.patch_id) continue;
+      for (const auto& r : sc.regions) {
+        if (r.name == p.region) s.retare.min_force_n = 0.5 * r.threshold_n;
+      }
+    }
+  }
   s.pipeline = link::MakePipeline(s.model, s.patch->spec, s.pipeline_config, s.choice);
   s.monitor_config.sample_rate_hz = s.config.rate_hz;
   s.monitor_config.heartbeat_period_ns = static_cast<std::int64_t>(s.config.heartbeat_ms * 1e6);
@@ -673,6 +721,7 @@ DecoderService::~DecoderService() { Stop(); }
 void DecoderService::Start() {
   Impl& s = *impl_;
   s.monitor = std::make_unique<link::Monitor>(*s.pipeline, s.monitor_config, NowBoth());
+  s.monitor->EnableRetare(s.model.has_response() ? &s.model.response() : nullptr, s.retare);
   s.decode_thread = std::thread([&s] { s.DecodeLoop(); });
   s.publish_thread = std::thread([&s] { s.PublishLoop(); });
   s.ingest_thread = std::thread([&s] { s.ingest->Run(); });

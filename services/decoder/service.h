@@ -47,6 +47,12 @@ struct ServiceConfig {
   // docs/security.md) and insecure (plaintext).
   std::string tls_dir;
   bool insecure = false;
+  // Re-tare (docs/safety.md "Re-tare"): a touch explaining the shifts with at least this force refuses it.
+  // 0: half the smallest threshold of the patch's region (the scene's safety section), 0.75 N without one.
+  double retare_force_n = 0.0;
+  // The baseline's staleness limit, s (0: the default, 300 s). Tests only: a short one makes a stale
+  // baseline in seconds. The hello's decoder configuration carries it.
+  double max_frozen_s = 0.0;
 };
 
 class DecoderService {

@@ -131,8 +131,24 @@ std::vector<MetricFamily> StatsCollectable::Collect() const {
           s.late_frames);
   {
     auto& f = family("ruffini_decoder_messages_sent_total", "Messages sent to the aggregator, by kind.", MetricType::Counter);
-    static constexpr std::array<std::string_view, 3> kKinds = {"contact", "heartbeat", "fault"};
+    static constexpr std::array<std::string_view, 4> kKinds = {"contact", "heartbeat", "fault", "retare_result"};
     for (std::size_t i = 0; i < kKinds.size(); ++i) add(f, Load(s.messages_sent[i]), {{"kind", std::string(kKinds[i])}});
+  }
+  {
+    auto& f = family("ruffini_decoder_retare_requests_total",
+                     "Re-tare requests from the aggregator: taken (judged on the next capture window) or repeated "
+                     "(an id already seen from this aggregator run; ignored).",
+                     MetricType::Counter);
+    add(f, Load(s.retare_requests), {{"result", "taken"}});
+    add(f, Load(s.retare_repeated), {{"result", "repeated"}});
+  }
+  {
+    auto& f = family("ruffini_decoder_retares_total",
+                     "Re-tares ended, by outcome (accepted: the baseline was replaced; the others: refused, named).",
+                     MetricType::Counter);
+    for (std::size_t i = 0; i < s.retares.size(); ++i) {
+      add(f, Load(s.retares[i]), {{"outcome", std::string(decode::RetareOutcomeName(static_cast<decode::RetareOutcome>(i)))}});
+    }
   }
   {
     auto& f = family("ruffini_decoder_messages_dropped_total",

@@ -44,7 +44,11 @@ struct Stats {
   std::atomic<std::uint64_t> late_messages{0};  // messages that waited past the freshness budget in ring B
   std::atomic<std::uint64_t> hello_timeouts{0}; // streams ended because the hello got no answer in time
   std::atomic<std::uint64_t> hello_wrong_robot{0}; // hellos accepted by an aggregator of another robot
-  std::array<std::atomic<std::uint64_t>, 3> messages_sent{};  // by link::Message::Kind
+  std::array<std::atomic<std::uint64_t>, 4> messages_sent{};  // by link::Message::Kind
+  // Re-tares (docs/safety.md "Re-tare"): requests taken by the decode thread, repeated ones ignored
+  // (publisher), and outcomes (decode thread, a copy of link::Monitor's).
+  std::atomic<std::uint64_t> retare_requests{0}, retare_repeated{0};
+  std::array<std::atomic<std::uint64_t>, decode::kRetareOutcomeCount> retares{};
 };
 
 // Every decoder metric, named by FACTS.md's rules (ruffini_ prefix, base units, _total on counters, bounded

@@ -534,6 +534,7 @@ struct StopRule {
         return m.fault.code != link::FaultCode::kNone ? StopCause::kFault : StopCause::kNone;
       case link::Message::Kind::kHeartbeat:
         return m.health.active_fault != link::FaultCode::kNone ? StopCause::kFault : StopCause::kNone;
+      case link::Message::Kind::kRetare: return StopCause::kNone;  // an operator's request's answer: none here
       case link::Message::Kind::kContact: break;
     }
     const link::Contact& c = m.contact;

@@ -503,6 +503,71 @@ TEST_F(CoreNoSeam, WithoutBandsTheSidesAreJudgedAlone) {
 // CLEAR, no epoch, the live link HEALTHY and its stream still served. Old code: the spec check came first,
 // SPEC_MISMATCH and OnHelloRefused set the patch REFUSED (FAULT PATCH_MISSING), and every later heartbeat of
 // the live stream was a kNotConnected rejection with a new epoch each.
+// RetarePatch (docs/safety.md "Re-tare"): sent only for an operator, this run, a known and connected patch, while
+// the robot is held, one at a time; the decoder's answer shows in the status and changes no safety state.
+TEST_F(CoreTest, ARetareIsSentOnlyWhileHeldOnceAtATimeAndItsResultChangesNothing) {
+  const auto streams = ClearAll();
+  auto ask = [&](const std::string& patch, std::uint64_t run = kRunId, bool authorized = true) {
+    v1::RetarePatchRequest r;
+    r.set_patch_id(patch);
+    r.set_aggregator_run_id(run);
+    r.set_operator_name("alice");
+    return core.OnRetare(r, authorized, tc);
+  };
+  const std::string a = setup.patches[0].id;
+  // CLEAR: the robot may move, so nothing is sent.
+  auto d = ask(a);
+  EXPECT_FALSE(d.response.sent());
+  EXPECT_EQ(d.response.reason(), v1::RETARE_REFUSAL_NOT_HELD);
+  EXPECT_FALSE(d.command.has_value());
+  // Held (a fault on patch 0).
+  v1::PatchMessage fault;
+  fault.mutable_fault()->set_code(v1::PATCH_FAULT_CODE_BASELINE_STALE);
+  Send(streams[0], 0, fault, tc);
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_FAULT);
+  const std::uint64_t epoch = core.SafetyState().stop_epoch();
+  EXPECT_EQ(ask(a, kRunId, false).response.reason(), v1::RETARE_REFUSAL_UNAUTHORIZED);
+  EXPECT_EQ(ask(a, kRunId + 1).response.reason(), v1::RETARE_REFUSAL_WRONG_RUN);
+  EXPECT_EQ(ask(a, 0).response.reason(), v1::RETARE_REFUSAL_WRONG_RUN);
+  EXPECT_EQ(ask("no_such_patch").response.reason(), v1::RETARE_REFUSAL_UNKNOWN_PATCH);
+  d = ask(a);
+  ASSERT_TRUE(d.response.sent()) << d.response.message();
+  ASSERT_TRUE(d.command.has_value());
+  EXPECT_EQ(d.stream, streams[0]);
+  EXPECT_EQ(d.command->retare().request_id(), d.response.request_id());
+  EXPECT_EQ(d.command->retare().operator_name(), "alice");
+  // A second one before the answer: busy; another patch is independent.
+  EXPECT_EQ(ask(a).response.reason(), v1::RETARE_REFUSAL_BUSY);
+  const auto other = ask(setup.patches[1].id);
+  EXPECT_TRUE(other.response.sent());
+  EXPECT_GT(other.response.request_id(), d.response.request_id());
+  // The answer: shown in the status, the pending request cleared, the safety state and epoch unchanged.
+  v1::PatchMessage answer;
+  answer.mutable_retare_result()->set_request_id(d.response.request_id());
+  answer.mutable_retare_result()->set_outcome(v1::RETARE_OUTCOME_PRESSING);
+  answer.mutable_retare_result()->set_force_n(1.2f);
+  ASSERT_FALSE(Send(streams[0], 0, answer, tc).close);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_FAULT);
+  EXPECT_EQ(core.SafetyState().stop_epoch(), epoch);
+  const auto st = core.Status(tc);
+  EXPECT_EQ(st.patches(0).last_retare().outcome(), v1::RETARE_OUTCOME_PRESSING);
+  EXPECT_EQ(st.patches(0).retare_pending(), 0u);
+  EXPECT_EQ(st.patches(1).retare_pending(), other.response.request_id());
+  EXPECT_EQ(core.counters().retare_results[v1::RETARE_OUTCOME_PRESSING], 1u);
+  EXPECT_EQ(core.counters().retare_requests[0], 2u);
+  EXPECT_EQ(core.counters().retare_requests[v1::RETARE_REFUSAL_WRONG_RUN], 2u);
+  // Answered: a new request is sent. An unanswered one stops blocking after kRetareAnswerNs.
+  EXPECT_TRUE(ask(a).response.sent());
+  EXPECT_EQ(ask(a).response.reason(), v1::RETARE_REFUSAL_BUSY);
+  tc += aggregate::Core::kRetareAnswerNs + kMs;
+  core.OnJointState(Joints(tc, 0.1), tc);
+  for (std::size_t i = 0; i < streams.size(); ++i) Heartbeat(streams[i], i, tc);
+  EXPECT_TRUE(ask(a).response.sent());
+  // A patch whose stream ended: not connected.
+  core.CloseStream(streams[2], tc);
+  EXPECT_EQ(ask(setup.patches[2].id).response.reason(), v1::RETARE_REFUSAL_NOT_CONNECTED);
+}
+
 TEST_F(CoreTest, ADuplicateHelloIsRefusedFirstAndChangesNothing) {
   const auto streams = ClearAll();
   ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);

@@ -2,6 +2,7 @@
 // monitor.h (heartbeats, faults and their priority, contacts, no NaN out), no threads, no ports.
 #include <gtest/gtest.h>
 
+#include <cctype>
 #include <cmath>
 #include <deque>
 #include <limits>
@@ -56,6 +57,7 @@ class ScriptedPipeline final : public link::FramePipeline {
     for (std::size_t i = 0; i < kGratings; ++i) w[i] = 1530.0 + 3.0 * static_cast<double>(i);
     tracker.Seed(w);
   }
+  void Retare(const Wavelengths& baseline_nm) noexcept override { tracker.Seed(baseline_nm); }
   decode::PipelineOutput Process(const Wavelengths&, std::uint32_t) noexcept override {
     ++c.frames;
     decode::PipelineOutput o = fallback;
@@ -339,6 +341,57 @@ TEST_F(MonitorTest, ProtoConversionKeepsEveryField) {
   EXPECT_EQ(rejected[v1::FRAME_REJECT_REASON_OUT_OF_RANGE], 1u);
   EXPECT_EQ(rejected[v1::FRAME_REJECT_REASON_WRONG_PEAK_COUNT], 1u);
   EXPECT_EQ(rejected.size(), 2u);
+}
+
+// Re-tare requests (docs/safety.md "Re-tare"): answered with the request's id; without a map refused no_map;
+// a second while one runs busy (the first goes on); a disconnect ends it interrupted; the health is untouched.
+TEST_F(MonitorTest, RetareRequestsAreAnsweredWithTheirIdAndOutcome) {
+  auto retares = [&] { return sink.Of(Message::Kind::kRetare); };
+  {
+    link::Monitor m(pipe, Config(), At(0));
+    m.OnConnected(At(0), sink);
+    Feed(m, 0, 5);
+    m.RequestRetare(7, At(6 * kMs), sink);  // never enabled: no map
+    ASSERT_EQ(retares().size(), 1u);
+    EXPECT_EQ(retares()[0].retare.request_id, 7u);
+    EXPECT_EQ(retares()[0].retare.outcome, decode::RetareOutcome::kNoMap);
+    EXPECT_TRUE(retares()[0].critical());
+  }
+  sink.got.clear();
+  const v1::DecoderModel model = decode::LoadModel(RUFFINI_SOURCE_DIR "/config/models/cobot-forearm_a.rmodel");
+  ASSERT_TRUE(model.has_response());
+  link::Monitor m(pipe, Config(), At(0));
+  decode::RetareConfig rc;
+  rc.min_force_n = 0.75;
+  m.EnableRetare(&model.response(), rc);
+  m.OnConnected(At(0), sink);
+  std::int64_t t = Feed(m, 0, 5);
+  const bool healthy = m.health().healthy;
+  m.RequestRetare(1, At(t), sink);
+  m.RequestRetare(2, At(t), sink);
+  ASSERT_EQ(retares().size(), 1u);
+  EXPECT_EQ(retares()[0].retare.request_id, 2u);
+  EXPECT_EQ(retares()[0].retare.outcome, decode::RetareOutcome::kBusy);
+  t = Feed(m, t, 10, 6);
+  EXPECT_EQ(m.health().healthy, healthy);
+  m.OnDisconnected(At(t), sink);
+  ASSERT_EQ(retares().size(), 2u);
+  EXPECT_EQ(retares()[1].retare.request_id, 1u);
+  EXPECT_EQ(retares()[1].retare.outcome, decode::RetareOutcome::kInterrupted);
+  EXPECT_FLOAT_EQ(retares()[1].retare.min_force_n, 0.75f);
+  EXPECT_EQ(m.retares()[static_cast<std::size_t>(decode::RetareOutcome::kBusy)], 1u);
+  EXPECT_EQ(m.retares()[static_cast<std::size_t>(decode::RetareOutcome::kInterrupted)], 1u);
+  // On the wire: the proto's outcome numbers are decode's + 1.
+  v1::PatchMessage out;
+  link::ToProto(retares()[1], "forearm", 9, out);
+  ASSERT_TRUE(out.has_retare_result());
+  EXPECT_EQ(out.retare_result().request_id(), 1u);
+  EXPECT_EQ(out.retare_result().outcome(), v1::RETARE_OUTCOME_INTERRUPTED);
+  for (std::size_t i = 0; i < decode::kRetareOutcomeCount; ++i) {
+    std::string name(decode::RetareOutcomeName(static_cast<decode::RetareOutcome>(i)));
+    for (char& ch : name) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
+    EXPECT_EQ(v1::RetareOutcome_Name(static_cast<v1::RetareOutcome>(i + 1)), "RETARE_OUTCOME_" + name);
+  }
 }
 
 TEST(RejectCodes, MatchTheProtoEnum) {

@@ -155,6 +155,31 @@ TEST(ScriptedSource, APressShiftsThePeaksAndTheyComeBackAfterRelease) {
   EXPECT_LT(max_after, 0.005);  // only noise (0.3 pm sigma) after release
 }
 
+// Offsets (a grating left off after a release, docs/sim.md): read from the file with the instrument's grating
+// numbers, applied from t_s on to that grating only; a grating outside 1..16 is named.
+TEST(ScriptedSource, AnOffsetStepsOneGratingFromItsTimeOn) {
+  const auto scene = twin::LoadScene(kScene);
+  const auto path = (std::filesystem::current_path() / "offset_scenario.yaml").string();
+  std::ofstream(path) << "loop: false\nduration_s: 2\npresses: []\noffsets:\n  - {t_s: 1.0, patch: forearm, grating: 16, pm: -50}\n";
+  const sim::Scenario s = sim::LoadScenario(path, scene);
+  ASSERT_EQ(s.offsets.size(), 1u);
+  EXPECT_EQ(s.offsets[0].grating, 15u);
+  sim::ScriptedSource src(scene, s, 1000.0);
+  std::vector<Wavelengths> before(1), after(1);
+  src.Sample(500, before);
+  src.Sample(1500, after);
+  EXPECT_NEAR((after[0][15] - before[0][15]) * 1e3, -50.0, 3.0);  // 50 pm, far above the 0.3 pm noise
+  for (std::size_t g = 0; g < 15; ++g) EXPECT_NEAR((after[0][g] - before[0][g]) * 1e3, 0.0, 3.0) << g;
+  const auto bad = (std::filesystem::current_path() / "bad_offset.yaml").string();
+  std::ofstream(bad) << "presses: []\noffsets:\n  - {t_s: 0, patch: forearm, grating: 17, pm: 1}\n";
+  try {
+    (void)sim::LoadScenario(bad, scene);
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("grating"), std::string::npos) << e.what();
+  }
+}
+
 TEST(ScriptedSource, AViscoelasticSceneCreepsUnderAHeldPressAndLeavesAResidual) {
   const auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/forearm-field-nodrift.yaml");
   ASSERT_TRUE(scene.effects.viscoelastic.has_value());

@@ -548,6 +548,16 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       Note(policy_.OnPatchFault(data_, id, code.value_or(safety::PatchFaultCode::kInternal), now_ns));
       break;
     }
+    case v1::PatchMessage::kRetareResult: {
+      // Changes nothing in the safety state: a re-tare only makes the patch able to heal (its heartbeats
+      // say so); the latch still needs its reset.
+      const v1::RetareResult& r = m.retare_result();
+      const auto o = static_cast<std::size_t>(r.outcome());
+      ++counters_.retare_results[o < counters_.retare_results.size() ? o : 0];
+      link.last_retare = r;
+      if (r.request_id() == link.retare_pending) link.retare_pending = 0;
+      break;
+    }
     case v1::PatchMessage::BODY_NOT_SET:
       return ProtocolError(stream, s, "a message without a body", now_ns);
   }
@@ -669,6 +679,47 @@ v1::ResetStopResponse Core::OnReset(const v1::ResetStopRequest& r, bool authoriz
   out.set_message(safety::Describe(policy_, res));
   *out.mutable_state() = SafetyState();
   return out;
+}
+
+Core::RetareDecision Core::OnRetare(const v1::RetarePatchRequest& r, bool authorized, std::int64_t now_ns) {
+  RetareDecision d;
+  auto refuse = [&](v1::RetareRefusal why, const std::string& text) {
+    ++counters_.retare_requests[static_cast<std::size_t>(why)];
+    d.response.set_sent(false);
+    d.response.set_reason(why);
+    d.response.set_message(text);
+    return d;
+  };
+  if (!authorized) return refuse(v1::RETARE_REFUSAL_UNAUTHORIZED, "only an operator may ask for a re-tare");
+  if (r.aggregator_run_id() != setup_.run_id) {
+    return refuse(v1::RETARE_REFUSAL_WRONG_RUN, "the request names another aggregator run (this one started since)");
+  }
+  const std::int32_t pi = policy_.FindPatch(r.patch_id());
+  if (pi < 0) return refuse(v1::RETARE_REFUSAL_UNKNOWN_PATCH, "the scene has no patch '" + r.patch_id() + "'");
+  const safety::State state = data_.state().state;
+  if (state != safety::State::kStop && state != safety::State::kFault) {
+    return refuse(v1::RETARE_REFUSAL_NOT_HELD, "the robot is not held (the state is neither STOP nor FAULT)");
+  }
+  PatchLink& link = links_[static_cast<std::size_t>(pi)];
+  auto it = streams_.find(link.stream);
+  if (link.stream < 0 || it == streams_.end() || !it->second.hello_done) {
+    return refuse(v1::RETARE_REFUSAL_NOT_CONNECTED, "patch '" + r.patch_id() + "' has no live decoder stream");
+  }
+  if (link.retare_pending != 0 && now_ns - link.retare_sent_ns < kRetareAnswerNs) {
+    return refuse(v1::RETARE_REFUSAL_BUSY, "re-tare " + std::to_string(link.retare_pending) + " of patch '" +
+                                               r.patch_id() + "' is not answered yet");
+  }
+  ++counters_.retare_requests[0];
+  link.retare_pending = ++retare_ids_;
+  link.retare_sent_ns = now_ns;
+  d.stream = link.stream;
+  d.command = Command(now_ns);
+  d.command->mutable_retare()->set_request_id(link.retare_pending);
+  d.command->mutable_retare()->set_operator_name(r.operator_name());
+  d.response.set_sent(true);
+  d.response.set_request_id(link.retare_pending);
+  d.response.set_message("re-tare " + std::to_string(link.retare_pending) + " sent to patch '" + r.patch_id() + "'");
+  return d;
 }
 
 void Core::Tick(std::int64_t now_ns) { Note(policy_.Tick(data_, now_ns)); }
@@ -827,6 +878,8 @@ v1::AggregatorStatus Core::Status(std::int64_t now_ns) const {
     *p->mutable_hello() = l.hello;
     *p->mutable_last_heartbeat() = l.heartbeat;
     *p->mutable_last_fault() = l.fault;
+    *p->mutable_last_retare() = l.last_retare;
+    p->set_retare_pending(l.retare_pending);
     for (const v1::SensitivityMap& m : setup_.patches[i].sensitivity) *p->add_sensitivity() = m;
   }
   for (const v1::RegionCoverage& c : setup_.coverage) *st.add_coverage() = c;

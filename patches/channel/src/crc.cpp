@@ -131,6 +131,17 @@ std::uint32_t SafetyCrc(const v1::PatchMessage& m) noexcept {
       c.I32(m.fault().code());
       c.I32(m.fault().reason());
       break;
+    case v1::PatchMessage::kRetareResult: {
+      const v1::RetareResult& r = m.retare_result();
+      c.U64(r.request_id());
+      c.I32(r.outcome());
+      c.F32(r.force_n());
+      c.F32(r.y_mm());
+      c.F32(r.r_deg());
+      c.F32(r.motion_pm());
+      c.F32(r.min_force_n());
+      break;
+    }
     case v1::PatchMessage::BODY_NOT_SET: break;
   }
   return c.Value();

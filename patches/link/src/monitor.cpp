@@ -74,6 +74,7 @@ class PipelineRunner final : public FramePipeline {
   [[nodiscard]] const decode::PipelineCounters& counters() const noexcept override { return data_.counters(); }
   [[nodiscard]] bool calibrated_uncertainty() const noexcept override { return pipeline_.calibrated_uncertainty(); }
   void OnStreamBreak() noexcept override { data_.ForgetTouches(); }
+  void Retare(const Wavelengths& baseline_nm) noexcept override { pipeline_.Retare(baseline_nm, data_); }
 
  private:
   decode::Pipeline<Scalar> pipeline_;
@@ -248,12 +249,14 @@ void Monitor::OnConnected(Now now, MessageSink& sink) noexcept {
   have_frame_ = false;
   connected_mono_ = now.mono_ns;
   pipeline_.OnStreamBreak();
+  InterruptRetare(now, sink);
   reject_run_ = 0;
   Update(now, sink);
 }
 
 void Monitor::OnDisconnected(Now now, MessageSink& sink) noexcept {
   connected_ = false;
+  InterruptRetare(now, sink);
   Update(now, sink);
 }
 
@@ -266,12 +269,22 @@ void Monitor::OnFrame(const FrameIn& f, Now now, MessageSink& sink) noexcept {
     ++health_.serial_gaps;
     health_.frames_lost += f.serial - last_serial_ - 1;
   }
-  if (have_serial_ && f.serial != last_serial_ + 1) pipeline_.OnStreamBreak();  // lost, repeated or restarted
+  if (have_serial_ && f.serial != last_serial_ + 1) {  // lost, repeated or restarted
+    pipeline_.OnStreamBreak();
+    InterruptRetare(now, sink);
+  }
   have_serial_ = true;
   last_serial_ = f.serial;
   last_t_ns_ = f.t_ns;
 
   const decode::PipelineOutput o = pipeline_.Process(f.wavelength_nm, f.flags);
+  if (retare_ && retare_->active()) {
+    if (const auto r = retare_->Feed(f.wavelength_nm, o, pipeline_.baseline())) {
+      // Accepted: the new baseline holds from the next frame; this frame's output stays as it was decoded.
+      if (r->outcome == decode::RetareOutcome::kAccepted) pipeline_.Retare(retare_->baseline_nm());
+      ReportRetare(retare_id_, *r, now, sink);
+    }
+  }
   if (o.over_range) {
     // More load than the model knows: a contact of at least the stated force, never a light one; reported,
     // so not a rejection run.
@@ -356,6 +369,50 @@ void Monitor::Shutdown(Now now, MessageSink& sink) noexcept {
   shutting_down_ = true;
   next_heartbeat_mono_ = now.mono_ns + config_.heartbeat_period_ns;  // the fault is the last word
   Update(now, sink);
+}
+
+void Monitor::EnableRetare(const v1::ResponseMap* map, const decode::RetareConfig& config) {
+  retare_ = std::make_unique<decode::Retare>(map, pipeline_.baseline().config(), config);
+  retare_force_n_ = static_cast<float>(config.min_force_n);
+}
+
+void Monitor::ReportRetare(std::uint64_t request_id, const decode::RetareResult& r, Now now, MessageSink& sink) noexcept {
+  ++retares_[static_cast<std::size_t>(r.outcome)];
+  Message& m = scratch_;
+  m.kind = Message::Kind::kRetare;
+  Stamp(m, now);
+  m.retare = RetareReport{};
+  m.retare.request_id = request_id;
+  m.retare.outcome = r.outcome;
+  m.retare.force_n = Finite(static_cast<float>(r.force_n));
+  m.retare.y_mm = Finite(static_cast<float>(r.y_mm));
+  m.retare.r_deg = Finite(static_cast<float>(r.r_deg));
+  m.retare.motion_pm = Finite(static_cast<float>(r.motion_pm));
+  m.retare.min_force_n = retare_force_n_;
+  sink.Push(m);
+  // The health changes at once when the baseline did (the next heartbeat would say so anyway).
+  if (r.outcome == decode::RetareOutcome::kAccepted) Update(now, sink);
+}
+
+void Monitor::InterruptRetare(Now now, MessageSink& sink) noexcept {
+  if (!retare_) return;
+  if (const auto r = retare_->Interrupt()) ReportRetare(retare_id_, *r, now, sink);
+}
+
+void Monitor::RequestRetare(std::uint64_t request_id, Now now, MessageSink& sink) noexcept {
+  decode::RetareResult refused;
+  refused.y_mm = refused.r_deg = 0.0;
+  if (!retare_) {
+    refused.outcome = decode::RetareOutcome::kNoMap;
+    ReportRetare(request_id, refused, now, sink);
+    return;
+  }
+  if (!retare_->Start()) {
+    refused.outcome = decode::RetareOutcome::kBusy;  // the one under way goes on and reports its own id
+    ReportRetare(request_id, refused, now, sink);
+    return;
+  }
+  retare_id_ = request_id;
 }
 
 std::int64_t Monitor::NextDeadlineMono() const noexcept {

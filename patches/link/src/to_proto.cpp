@@ -69,6 +69,17 @@ void ToProto(const Message& m, const std::string& patch_id, std::uint64_t seq, v
       p->set_message(m.fault.text.data());
       break;
     }
+    case Message::Kind::kRetare: {
+      v1::RetareResult* p = out.mutable_retare_result();
+      p->set_request_id(m.retare.request_id);
+      p->set_outcome(static_cast<v1::RetareOutcome>(static_cast<int>(m.retare.outcome) + 1));
+      p->set_force_n(m.retare.force_n);
+      p->set_y_mm(m.retare.y_mm);
+      p->set_r_deg(m.retare.r_deg);
+      p->set_motion_pm(m.retare.motion_pm);
+      p->set_min_force_n(m.retare.min_force_n);
+      break;
+    }
   }
 }
 

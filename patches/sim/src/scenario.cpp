@@ -48,6 +48,21 @@ Scenario LoadScenario(const std::string& path, const twin::Scene& scene) {
     p.Finish();
     s.presses.push_back(press);
   }
+  if (root.Has("offsets")) {
+    for (YamlReader& o : root.Sequence("offsets")) {
+      Offset off;
+      off.t_s = o.Number("t_s", 0.0, 1e6);
+      const std::string name = o.String("patch");
+      const auto it = std::find_if(scene.patches.begin(), scene.patches.end(),
+                                   [&](const twin::ScenePatch& sp) { return sp.name == name; });
+      if (it == scene.patches.end()) o.Fail("patch", "is not a patch of scene " + scene.source);
+      off.patch = static_cast<std::size_t>(it - scene.patches.begin());
+      off.grating = static_cast<std::size_t>(o.Integer("grating", 1, static_cast<long>(kGratings)) - 1);
+      off.pm = o.Number("pm", -1e4, 1e4);
+      o.Finish();
+      s.offsets.push_back(off);
+    }
+  }
   double end = 0.0;
   for (const auto& p : s.presses) end = std::max(end, p.end_s());
   s.duration_s = root.NumberOr("duration_s", end, 0.0, 1e6);
@@ -190,6 +205,9 @@ void ScriptedSource::Sample(std::uint64_t sample, std::span<Wavelengths> out) {
       twins_[c]->StrainShiftsPm(contacts_, s, flags);
     }
     sims_[c]->Read(t_abs, s, out[c], flags);
+    for (const Offset& o : scenario_.offsets) {
+      if (o.patch == c && t >= o.t_s && std::isfinite(out[c][o.grating])) out[c][o.grating] += o.pm * 1e-3;
+    }
   }
 }
 

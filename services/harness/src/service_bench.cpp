@@ -55,6 +55,7 @@ class ProtoSink final : public link::MessageSink {
       case link::Message::Kind::kContact: ++contacts_; break;
       case link::Message::Kind::kHeartbeat: ++heartbeats_; break;
       case link::Message::Kind::kFault: ++faults_; break;
+      case link::Message::Kind::kRetare: break;  // only on an operator's request: none in a bench
     }
   }
   std::string patch_id_;

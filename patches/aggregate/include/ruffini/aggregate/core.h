@@ -123,6 +123,8 @@ struct Counters {
   std::array<std::uint64_t, kBadInputCount> bad_input{};          // by BadInput
   std::uint64_t takeovers = 0;                                    // silent streams replaced by a new hello
   std::uint64_t seam_sums = 0;  // contacts judged on the sum of both sides of their seam (it was larger)
+  std::array<std::uint64_t, v1::RetareRefusal_ARRAYSIZE> retare_requests{};  // [0]: sent; else by refusal
+  std::array<std::uint64_t, v1::RetareOutcome_ARRAYSIZE> retare_results{};   // by v1::RetareOutcome
 };
 
 class Core {
@@ -154,6 +156,18 @@ class Core {
 
   // --- ResetStop ---
   v1::ResetStopResponse OnReset(const v1::ResetStopRequest& r, bool authorized, std::int64_t now_ns);
+
+  // --- RetarePatch (docs/safety.md "Re-tare") ---
+  // Sent only when authorized, for this run, to a known patch whose decoder is connected, while the safety
+  // state is STOP or FAULT, and when no earlier request of that patch is still unanswered (within
+  // kRetareAnswerNs). A sent request is a command on the patch's stream: `stream` and `command`.
+  static constexpr std::int64_t kRetareAnswerNs = 5'000'000'000;
+  struct RetareDecision {
+    v1::RetarePatchResponse response;
+    int stream = -1;
+    std::optional<v1::AggregatorCommand> command;
+  };
+  RetareDecision OnRetare(const v1::RetarePatchRequest& r, bool authorized, std::int64_t now_ns);
 
   // Deadlines (patch silence, joint staleness); call every few ms.
   void Tick(std::int64_t now_ns);
@@ -213,6 +227,9 @@ class Core {
     bool doubtful = false;                // the newest contact was refused as a doubt: shown unplaced, not fused
     v1::BodyContact contact;              // the newest contact, placed when possible
     v1::PatchContact surface;             // the newest contact as the decoder sent it (patch frame)
+    v1::RetareResult last_retare;         // the newest re-tare result
+    std::uint64_t retare_pending = 0;     // the request sent and not answered yet
+    std::int64_t retare_sent_ns = 0;
   };
   struct JointSample {
     std::int64_t t_ns = 0;
@@ -266,6 +283,7 @@ class Core {
   Counters counters_;
   std::uint64_t command_seq_ = 0;
   std::uint64_t contact_ids_ = 0;
+  std::uint64_t retare_ids_ = 0;  // RetarePatch request ids (per run, from 1)
   bool changed_ = true;
   std::int64_t stop_latency_ns_ = -1;
   std::uint64_t latency_epoch_ = 0;  // the STOP whose latency was taken

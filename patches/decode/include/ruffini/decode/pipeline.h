@@ -186,6 +186,22 @@ class Pipeline {
     bool smooth_primed_ = false;
   };
 
+  // An accepted re-tare (retare.h): the baseline becomes baseline_nm (tracking, not frozen), and whatever
+  // remembered the old one starts afresh: the networks' window holds the new baseline (zero shifts, as if
+  // untouched for the whole window), the gate and the contact are closed, the two-touch cache is gone.
+  // Real-time safe.
+  void Retare(const Wavelengths& baseline_nm, Data& d) const noexcept {
+    d.tracker_.Seed(baseline_nm);
+    ShiftsPm rest{};
+    decoder_.Reset(d.net_, &rest);
+    d.primed_ = true;
+    d.invalid_run_ = 0;
+    d.open_run_ = 0;
+    d.gate_ = d.contact_ = d.over_range_ = false;
+    d.recent_peak_pm_ = 0.0f;
+    d.pair_age_ = 1 << 30;
+  }
+
   // One interrogator frame. Real-time safe: no allocation, no lock, no throw.
   PipelineOutput Process(const Wavelengths& wavelength_nm, std::uint32_t source_flags, Data& data) const noexcept;
 

@@ -8,6 +8,7 @@
 #include <string_view>
 
 #include "ruffini/decode/pipeline.h"
+#include "ruffini/decode/retare.h"
 #include "ruffini/ingest/hyperion.h"
 
 namespace ruffini::link {
@@ -84,8 +85,18 @@ struct Fault {
   std::array<char, 120> text{};  // NUL-terminated
 };
 
+// The outcome of a re-tare the aggregator asked for (decode/retare.h).
+struct RetareReport {
+  std::uint64_t request_id = 0;
+  decode::RetareOutcome outcome = decode::RetareOutcome::kInterrupted;
+  float force_n = 0.0f;           // the largest force one touch on the map explains (0: not judged)
+  float y_mm = 0.0f, r_deg = 0.0f;  // where (0: none)
+  float motion_pm = 0.0f;
+  float min_force_n = 0.0f;       // the decoder's re-tare force
+};
+
 struct Message {
-  enum class Kind : std::uint8_t { kContact, kHeartbeat, kFault };
+  enum class Kind : std::uint8_t { kContact, kHeartbeat, kFault, kRetare };
   Kind kind = Kind::kHeartbeat;
   std::uint64_t serial = 0;     // interrogator serial of the newest frame (0: none yet)
   std::int64_t t_ns = 0;        // its interrogator timestamp, Unix ns
@@ -94,10 +105,11 @@ struct Message {
   Contact contact;
   Health health;
   Fault fault;
+  RetareReport retare;
 
-  // Never dropped on a full ring: faults, contact onsets and releases.
+  // Never dropped on a full ring: faults, re-tare results, contact onsets and releases.
   [[nodiscard]] bool critical() const noexcept {
-    return kind == Kind::kFault || (kind == Kind::kContact && (contact.onset || contact.released));
+    return kind == Kind::kFault || kind == Kind::kRetare || (kind == Kind::kContact && (contact.onset || contact.released));
   }
 };
 

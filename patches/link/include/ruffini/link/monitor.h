@@ -23,6 +23,7 @@
 #include <string>
 
 #include "ruffini/decode/pipeline.h"
+#include "ruffini/decode/retare.h"
 #include "ruffini/link/messages.h"
 #include "ruffini/patch/spec.h"
 #include "ruffini/v1/model.pb.h"
@@ -54,6 +55,8 @@ class FramePipeline {
   // The interrogator stream broke (a serial gap or a reconnect): state that assumes consecutive frames (the
   // two-touch fit's cached places) starts afresh.
   virtual void OnStreamBreak() noexcept {}
+  // An accepted re-tare: the pipeline's baseline becomes baseline_nm (decode::Pipeline::Retare).
+  virtual void Retare(const Wavelengths& baseline_nm) noexcept = 0;
 };
 
 // A decoder configuration users pick at deployment (a point of the bench's speed/accuracy table): the
@@ -108,6 +111,17 @@ class Monitor {
   void Tick(Now now, MessageSink& sink) noexcept;
   // The last fault (shutting_down), then nothing healthy ever again.
   void Shutdown(Now now, MessageSink& sink) noexcept;
+  // Re-tare (decode/retare.h, docs/safety.md "Re-tare"). EnableRetare gives the model's response map (nullptr:
+  // none; every request is then refused no_map) and the settings; call once before the first request. Throws
+  // InputError on a bad map or settings.
+  void EnableRetare(const v1::ResponseMap* map, const decode::RetareConfig& config);
+  // The aggregator asked (request_id from its command): the next capture window of frames is judged, and a
+  // kRetare message reports the outcome (busy at once when one is under way; no_map without EnableRetare's
+  // map). While it runs, and until an accepted one replaces the baseline, the patch's health is what it was
+  // (a stale baseline stays a fault): nothing can heal early.
+  void RequestRetare(std::uint64_t request_id, Now now, MessageSink& sink) noexcept;
+  // Re-tares by outcome (cumulative).
+  [[nodiscard]] const std::array<std::uint64_t, decode::kRetareOutcomeCount>& retares() const noexcept { return retares_; }
 
   // Steady-clock time (ns) by which Tick must run next.
   [[nodiscard]] std::int64_t NextDeadlineMono() const noexcept;
@@ -140,6 +154,12 @@ class Monitor {
   std::uint32_t last_reject_code_ = 0;
   bool in_contact_ = false;
   Message scratch_;                // built in place, pushed by reference
+  std::unique_ptr<decode::Retare> retare_;
+  std::uint64_t retare_id_ = 0;    // the request under way
+  float retare_force_n_ = 0.0f;
+  std::array<std::uint64_t, decode::kRetareOutcomeCount> retares_{};
+  void ReportRetare(std::uint64_t request_id, const decode::RetareResult& r, Now now, MessageSink& sink) noexcept;
+  void InterruptRetare(Now now, MessageSink& sink) noexcept;
 };
 
 }  // namespace ruffini::link

@@ -7,6 +7,8 @@
 //   seed: 1                 # optional: interrogator noise seed
 //   presses:
 //     - {t_s: 0.5, patch: forearm, y_mm: 10, r_deg: 0, force_n: 1.5, ramp_s: 0.2, hold_s: 0.5, release_s: 0.2}
+//   offsets:                # optional: a grating's peak stepped by pm from t_s on (grating 1..16)
+//     - {t_s: 3, patch: forearm, grating: 16, pm: -0.8}
 //
 // One probe, any point of the limb: (y_mm, r_deg) are coordinates on the named patch's cylinder and may lie
 // outside it (across a seam, on bare limb). In a scene with a robot (mounts), the probe loads every patch on
@@ -44,12 +46,22 @@ struct Press {
   [[nodiscard]] double ForceAt(double t) const noexcept;
 };
 
+// A step on one grating's peak from t_s on (pm, added after the interrogator's noise): a grating that stays
+// off after a release, as a baseline that kept part of a press sees it (docs/safety.md "Re-tare").
+struct Offset {
+  double t_s = 0.0;
+  std::size_t patch = 0;   // index into the scene's patches
+  std::size_t grating = 0; // 0-based (the file says 1..16, as the instrument's panel counts)
+  double pm = 0.0;
+};
+
 struct Scenario {
   std::string source;
   bool loop = true;
   double duration_s = 0.0;
   std::uint64_t seed = 1;
   std::vector<Press> presses;
+  std::vector<Offset> offsets;
 };
 
 // Where one probe at (y_mm, r_deg) on patch `patch`'s cylinder presses the scene's patches. The contact law's
