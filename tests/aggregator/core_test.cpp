@@ -430,6 +430,8 @@ class CoreSeam : public CoreTest {
     std::vector<robot::MountedSurface> surfaces;
     for (const auto& p : s.patches) surfaces.push_back({*p.mount, p.extent_y_mm, p.extent_r_deg});
     for (const robot::Seam& seam : robot::FindSeams(surfaces)) s.seams.push_back({seam, 30.0, 30.0});
+    s.safety.seam_sum.enabled = true;
+    s.safety.seam_sum.source = "test";
     return s;
   }
   CoreSeam() : CoreTest(WithSeams()) {}
@@ -472,20 +474,57 @@ TEST_F(CoreSeam, AProbeOnTheSeamIsJudgedOnBothSidesForces) {
   EXPECT_EQ(core.counters().seam_sums, 1u);
 }
 
-TEST_F(CoreSeam, FarFromTheSeamLateOrReleasedTheSidesAreNotSummed) {
+TEST_F(CoreSeam, FarFromTheSeamApartAlongItOrReleasedTheSidesAreNotSummed) {
   const std::vector<int> streams = ClearAll();
   // forearm_b's contact 100 deg (65 mm) from the seam: two touches.
   Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
   Send(streams[1], 1, Located(0.9f, 75, 100, tc + kMs), tc + kMs);
   EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
-  // On the seam but 10 ms apart (frame times): not one instant. (Heartbeats keep every patch live.)
+  // Both on the seam but 60 mm apart along it (2 mm sd each): two touches.
   Beat(streams, 10);
-  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
-  Send(streams[1], 1, Located(0.9f, 75, 15, tc + 10 * kMs), tc + 10 * kMs);
+  Send(streams[0], 0, Located(0.9f, 45, 130, tc), tc);
+  Send(streams[1], 1, Located(0.9f, 105, 15, tc + kMs), tc + kMs);
   EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
   // The other side released: nothing to add.
   Beat(streams, 10);
   Send(streams[0], 0, Located(0.0f, 75, 130, tc, true), tc);
+  Send(streams[1], 1, Located(0.9f, 75, 15, tc + kMs), tc + kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  EXPECT_EQ(core.counters().seam_sums, 0u);
+}
+
+// Review 3, finding 2: the sum pairs the two sides by arrival, not by frame time, so a side whose interrogator
+// clock or decoder runs 10 ms behind does not end the cause while the press goes on.
+TEST_F(CoreSeam, ALaggingSideKeepsTheSumWhileThePressGoesOn) {
+  const std::vector<int> streams = ClearAll();
+  for (int k = 0; k < 300; ++k) {
+    tc += kMs;
+    Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+    Send(streams[1], 1, Located(0.9f, 75, 15, tc - 10 * kMs), tc);
+    if (k % 10 == 0) {
+      core.OnJointState(Joints(tc, 0.1), tc);
+      for (std::size_t i = 2; i < streams.size(); ++i) Heartbeat(streams[i], i, tc);
+      core.Tick(tc);
+    }
+  }
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+  const auto r = core.OnReset(ResetRequest(core.SafetyState().stop_epoch()), true, tc);
+  EXPECT_FALSE(r.accepted()) << "the 0.9 + 0.9 N press is still on the seam: " << r.message();
+}
+
+class CoreSeamSumOff : public CoreSeam {
+ protected:
+  static aggregate::Setup Off() {
+    aggregate::Setup s = WithSeams();
+    s.safety.seam_sum = {};
+    return s;
+  }
+  CoreSeamSumOff() : CoreSeam(Off()) {}
+};
+
+TEST_F(CoreSeamSumOff, TheSceneDefaultJudgesEachSideAlone) {
+  const std::vector<int> streams = ClearAll();
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
   Send(streams[1], 1, Located(0.9f, 75, 15, tc + kMs), tc + kMs);
   EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
   EXPECT_EQ(core.counters().seam_sums, 0u);

@@ -29,7 +29,7 @@ struct SeamFrame {
   bool plain_fused = false;
   double plain_error_mm = NAN;
   // What the aggregator's stop judges: the larger of the patches' own forces, and with the seam rule the sum
-  // of both sides' forces when both may lie on the seam (aggregate::Core::JudgeOnSeam).
+  // of both sides' forces when one touch on the seam may explain both (aggregate::Core::JudgeOnSeam).
   double own_max_n = 0.0;
   double judged_n = 0.0;
 };
@@ -89,6 +89,10 @@ class SeamRig {
   [[nodiscard]] double band_mm(int side) const noexcept { return bands_[side]; }
   [[nodiscard]] const robot::MountedSurface& surface(std::size_t patch) const { return surfaces_.at(patch); }
   [[nodiscard]] const HardPressRig& rig(int side) const noexcept { return *rigs_[side]; }
+  // For probes (review 3): the fuser with the seam rule, the link poses at q = 0, the mounted scene.
+  [[nodiscard]] const fusion::Fuser& fuser() const noexcept { return *fuser_; }
+  [[nodiscard]] const robot::Data& fk() const noexcept { return fk_; }
+  [[nodiscard]] const sim::MountedScene& mounts() const noexcept { return *mounts_; }
 
   // The probe at (y_mm, r_deg) on patch seam().a's cylinder (r_deg may pass its edge) with force_n; nullopt
   // when its footprint does not load both patches. Otherwise one SeamFrame per hold frame.
@@ -133,7 +137,7 @@ class SeamRig {
     return frames;
   }
 
- private:
+ public:
   static fusion::SurfaceContact Surface(const link::Contact& c) {
     fusion::SurfaceContact s;
     s.force_n = c.force_n;
@@ -148,6 +152,7 @@ class SeamRig {
     return s;
   }
 
+ private:
   SeamFrame Judge(const std::vector<fusion::PatchInput>& in, const Eigen::Vector3d& truth, fusion::FusionData& data) const {
     SeamFrame f;
     f.patches_in_contact = static_cast<int>(in.size());
@@ -159,7 +164,7 @@ class SeamRig {
     f.judged_n = f.own_max_n;
     const fusion::FusionConfig& fc = fuser_->config();
     if (in.size() == 2 && !fc.seams.empty() &&
-        fusion::MayBeOnSeam(fc.seams[0], fc.patches[seam_.a], in.front().contact, fc.patches[seam_.b], in.back().contact, fc.lift)) {
+        fusion::OneTouchOnSeam(fc, fc.seams[0], in.front().contact, in.back().contact)) {
       f.judged_n = std::max(f.judged_n, sum);
     }
     fuser_->Update(in, fk_.X_BL, data);

@@ -215,6 +215,15 @@ TEST_F(SafetyScene, StopRule) {
   EXPECT_NE(Message(p).find("'safety.stop_rule.sd_k' (4) must lie inside -3..3"), std::string::npos) << Message(p);
 }
 
+TEST_F(SafetyScene, SeamSumIsOffUnlessTheSceneSaysWhy) {
+  EXPECT_FALSE(ConfigFromScene(Write("arm", "arm", kArm)).seam_sum.enabled);
+  const Config c = ConfigFromScene(Write("arm", "arm", kArm, "  seam_sum: {enabled: true, source: measured}\n"));
+  EXPECT_TRUE(c.seam_sum.enabled);
+  EXPECT_EQ(c.seam_sum.source, "measured");
+  const std::string p = Write("arm", "arm", kArm, "  seam_sum: {enabled: true}\n");
+  EXPECT_NE(Message(p).find("'safety.seam_sum.source' is missing"), std::string::npos) << Message(p);
+}
+
 TEST_F(SafetyScene, ContactReleaseAndInputLimitsAreValidated) {
   std::string p = Write("arm", "arm", kArm, "  contact_release: {fraction: 0.1, hold_ms: 100}\n");
   EXPECT_EQ(Message(p), p + ":12:20: 'safety.contact_release.source' is missing: say why this release level and "

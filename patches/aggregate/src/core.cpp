@@ -123,31 +123,31 @@ Core::Core(Setup setup, std::int64_t now_ns)
 }
 
 // One probe across a seam loads both patches, and each decoder reads only its share (docs/fusion.md, "Seams"):
-// a contact that may lie on its seam while the other side's newest contact (at most seam_sum_window_ns apart,
-// not a doubt, not released) may too is judged on the sum of both forces. Only ever raises the force judged.
-void Core::JudgeOnSeam(std::size_t pi, std::int64_t t_ns, const v1::PatchContact& c, safety::Contact& sc) noexcept {
-  if (!fuser_ || !c.located() || !std::isfinite(c.force_n())) return;
+// a contact is judged on the sum of both sides' forces when one touch on the seam may explain both
+// (fusion::OneTouchOnSeam: each within its band across the seam, and the two agree along it) and the other side's
+// newest contact is live: in contact, not a doubt, and received within its patch's silence deadline (arrival
+// time, not frame times: two interrogators' clocks may differ, and a side that lags must not end the sum while
+// the press goes on). Only the force is raised; the contact's own sd stays (the stop rule never judges the sum
+// lower than the contact alone, and a sd it cannot read stays unreadable).
+void Core::JudgeOnSeam(std::size_t pi, const v1::PatchContact& c, safety::Contact& sc, std::int64_t now_ns) noexcept {
+  if (!setup_.safety.seam_sum.enabled || !fuser_ || !c.located() || !std::isfinite(c.force_n())) return;
   const fusion::FusionConfig& fc = fuser_->config();
+  float best = sc.force_n;
   for (const fusion::FusionConfig::SeamBand& sb : fc.seams) {
     if (sb.seam.a != pi && sb.seam.b != pi) continue;
     const std::size_t pj = sb.seam.a == pi ? sb.seam.b : sb.seam.a;
     const PatchLink& other = links_[pj];
     if (other.stream < 0 || !other.in_contact || other.doubtful || !other.surface.located()) continue;
+    if (now_ns - other.contact_arrival_ns > setup_.safety.patches[pj].silence_deadline_ns) continue;
     const float f_other = other.surface.force_n();
     if (!std::isfinite(f_other) || f_other <= 0) continue;
-    const std::int64_t dt = other.contact.t_ns() - t_ns;
-    if (dt > setup_.seam_sum_window_ns || dt < -setup_.seam_sum_window_ns) continue;
     const fusion::SurfaceContact mine = SurfaceOf(c), theirs = SurfaceOf(other.surface);
-    const bool on = sb.seam.a == pi ? fusion::MayBeOnSeam(sb, fc.patches[pi], mine, fc.patches[pj], theirs, fc.lift)
-                                    : fusion::MayBeOnSeam(sb, fc.patches[pj], theirs, fc.patches[pi], mine, fc.lift);
-    if (!on) continue;
-    const float sum = c.force_n() + f_other;
-    if (!(sum > sc.force_n)) continue;
-    sc.force_n = sum;
-    // Independent decoders: the variances add (0, not calibrated, unless both are).
-    sc.force_sd_n = c.uncertainty_calibrated() && other.surface.uncertainty_calibrated()
-                        ? std::sqrt(c.force_sd_n() * c.force_sd_n() + other.surface.force_sd_n() * other.surface.force_sd_n())
-                        : 0.0f;
+    const bool one = sb.seam.a == pi ? fusion::OneTouchOnSeam(fc, sb, mine, theirs) : fusion::OneTouchOnSeam(fc, sb, theirs, mine);
+    if (!one) continue;
+    best = std::max(best, c.force_n() + f_other);
+  }
+  if (best > sc.force_n) {
+    sc.force_n = best;
     ++counters_.seam_sums;
   }
 }
@@ -536,7 +536,8 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       link.surface = c;
       link.doubtful = !std::isfinite(c.force_n()) || c.force_n() < -setup_.safety.input.negative_force_tolerance_n;
       if (placed) sc.p_bc_m = std::array<double, 3>{body.p_bc_m().x(), body.p_bc_m().y(), body.p_bc_m().z()};
-      if (!link.doubtful && !c.released()) JudgeOnSeam(pi, m.t_ns(), c, sc);
+      if (!link.doubtful) link.contact_arrival_ns = now_ns;
+      if (!link.doubtful && !c.released()) JudgeOnSeam(pi, c, sc, now_ns);
       Note(policy_.OnContact(data_, id, sc, now_ns));
       break;
     }

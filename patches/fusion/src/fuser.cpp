@@ -54,6 +54,14 @@ Fuser::Fuser(const robot::Model& model, FusionConfig config) : config_(std::move
     patch_link_.push_back(robot::ValidateMount(model, p.mount, where + ".mount"));
   }
 
+  if (config_.seams.size() > kMaxSeams) {
+    throw InputError("fusion.seams: " + std::to_string(config_.seams.size()) + " seams; at most " + std::to_string(kMaxSeams));
+  }
+  if (!(std::isfinite(config_.seam_along_floor_mm) && config_.seam_along_floor_mm >= 0 && config_.seam_along_floor_mm <= 1000)) {
+    std::ostringstream m;
+    m << "fusion.seam_along_floor_mm (" << config_.seam_along_floor_mm << ") must lie in [0, 1000]";
+    throw InputError(m.str());
+  }
   for (std::size_t i = 0; i < config_.seams.size(); ++i) {
     const FusionConfig::SeamBand& sb = config_.seams[i];
     const std::string where = Field("seams", i);
@@ -145,18 +153,49 @@ bool MayBeOnSeam(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const 
          db - 2.0 * std::sqrt(AcrossEdgeVariance(cb, sb.seam.edge_b, lift)) <= sb.band_b_mm;
 }
 
+double AlongSeamD2(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const SurfaceContact& ca,
+                   const FusionPatch& pb, const SurfaceContact& cb, const LiftConfig& lift,
+                   double along_floor_mm) noexcept {
+  // Both contacts moved onto the seam, in their (common) link's frame: what separates them is along the seam.
+  const SurfaceContact oa = OntoEdge(pa, sb.seam.edge_a, ca), ob = OntoEdge(pb, sb.seam.edge_b, cb);
+  const Eigen::Vector3d p_a = robot::PatchToLink(pa.mount, {oa.y_mm, oa.r_deg}).p_LS_m;
+  const Eigen::Vector3d p_b = robot::PatchToLink(pb.mount, {ob.y_mm, ob.r_deg}).p_LS_m;
+  const double d_mm = (p_a - p_b).norm() * 1e3;
+  const double var = AlongEdgeVariance(ca, sb.seam.edge_a, lift) + AlongEdgeVariance(cb, sb.seam.edge_b, lift) +
+                     2.0 * along_floor_mm * along_floor_mm;
+  const double d2 = d_mm * d_mm / var;
+  return std::isfinite(d2) ? d2 : std::numeric_limits<double>::infinity();
+}
+
+bool OneTouchOnSeam(const FusionConfig& config, const FusionConfig::SeamBand& sb, const SurfaceContact& ca,
+                    const SurfaceContact& cb) noexcept {
+  const FusionPatch& pa = config.patches[sb.seam.a];
+  const FusionPatch& pb = config.patches[sb.seam.b];
+  return MayBeOnSeam(sb, pa, ca, pb, cb, config.lift) &&
+         AlongSeamD2(sb, pa, ca, pb, cb, config.lift, config.seam_along_floor_mm) <= kChi2_1dof_95;
+}
+
 // Seams (docs/fusion.md, "Seams"). A decoder trained on its patch's interior places a touch on the seam well
 // inside its own patch (edge locations are pulled inward), so the two patches' contacts of one probe across a
 // seam lie tens of mm apart, often with covariances that do not cover the gap, and the gate keeps them apart.
 // A contact may be on the seam when the seam lies within its band (how far from the seam its decoder places a
 // touch on it, from its sensitivity map) plus 2 sd of its own across the seam. When both contacts may be, each
-// is moved onto the seam: along it, it keeps its place and variance; across it, it gets a sd of half the wider
-// band (one probe on the seam or two touches in the bands, the estimate covers both). If the two then pass the
-// gate along the seam they are fused as usual (covariance intersection); if not (two places along the seam),
-// both are replaced by their 50/50 mixture (the mean, and the mean covariance plus the spread), one contact
-// whose covariance holds both places, as for two touches on one patch.
+// is moved onto the seam: along it, it keeps its place and variance; across it, it gets a sd of half of the
+// larger of (band + 2 own sd) over the two sides (so each contact's own place lies within 2 sd, and never less
+// than its own sd). If the two then pass the gate they are fused as usual (covariance intersection); if not
+// (two places along the seam), both are replaced by their 50/50 mixture (the mean, and the mean covariance plus
+// the spread), one contact whose covariance holds both places, as for two touches on one patch. A patch on
+// several seams is placed on at most one: the candidate pairs are taken in ascending gate distance.
 void Fuser::PlaceOnSeams(std::span<const Eigen::Isometry3d> X_BL, FusionData& data) const noexcept {
-  for (const FusionConfig::SeamBand& sb : config_.seams) {
+  struct Candidate {
+    std::size_t seam = 0;
+    double d2 = 0.0;
+    LiftedContact la, lb;
+  };
+  std::array<Candidate, kMaxSeams> candidates;
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < config_.seams.size() && n < kMaxSeams; ++k) {
+    const FusionConfig::SeamBand& sb = config_.seams[k];
     const std::size_t a = sb.seam.a, b = sb.seam.b;
     if (!data.have_[a] || !data.have_[b]) continue;
     const SurfaceContact& ca = data.input_[a];
@@ -164,7 +203,9 @@ void Fuser::PlaceOnSeams(std::span<const Eigen::Isometry3d> X_BL, FusionData& da
     const FusionPatch& pa = config_.patches[a];
     const FusionPatch& pb = config_.patches[b];
     if (!MayBeOnSeam(sb, pa, ca, pb, cb, config_.lift)) continue;
-    const double across_sd_mm = 0.5 * std::max(sb.band_a_mm, sb.band_b_mm);
+    const double sd_a = std::sqrt(AcrossEdgeVariance(ca, sb.seam.edge_a, config_.lift));
+    const double sd_b = std::sqrt(AcrossEdgeVariance(cb, sb.seam.edge_b, config_.lift));
+    const double across_sd_mm = 0.5 * std::max(sb.band_a_mm + 2.0 * sd_a, sb.band_b_mm + 2.0 * sd_b);
     auto lift_onto_seam = [&](const FusionPatch& p, std::size_t i, robot::PatchEdge edge, const SurfaceContact& c,
                               LiftedContact& out) {
       const double along = AlongEdgeVariance(c, edge, config_.lift);
@@ -175,25 +216,40 @@ void Fuser::PlaceOnSeams(std::span<const Eigen::Isometry3d> X_BL, FusionData& da
       C(1, 1) = r_edge ? across : along;
       return Lift(p, X_BL[patch_link_[i]], OntoEdge(p, edge, c), config_.lift, out, &C);
     };
-    LiftedContact la, lb;
-    if (lift_onto_seam(pa, a, sb.seam.edge_a, ca, la) != Rejection::kNone ||
-        lift_onto_seam(pb, b, sb.seam.edge_b, cb, lb) != Rejection::kNone) {
+    Candidate& cand = candidates[n];
+    if (lift_onto_seam(pa, a, sb.seam.edge_a, ca, cand.la) != Rejection::kNone ||
+        lift_onto_seam(pb, b, sb.seam.edge_b, cb, cand.lb) != Rejection::kNone) {
       continue;
     }
-    if (la.n_B.dot(lb.n_B) < cos_max_normal_angle_) continue;
-    const double d2 = TangentMahalanobis2({la.p_BC_m, la.cov_p_BC_m2}, {lb.p_BC_m, lb.cov_p_BC_m2}, la.n_B + lb.n_B);
-    if (!(d2 <= config_.gate_chi2)) {
+    if (cand.la.n_B.dot(cand.lb.n_B) < cos_max_normal_angle_) continue;
+    cand.seam = k;
+    cand.d2 = TangentMahalanobis2({cand.la.p_BC_m, cand.la.cov_p_BC_m2}, {cand.lb.p_BC_m, cand.lb.cov_p_BC_m2},
+                                  cand.la.n_B + cand.lb.n_B);
+    if (!std::isfinite(cand.d2)) cand.d2 = std::numeric_limits<double>::infinity();
+    ++n;
+  }
+  // Best pairs first (insertion sort: at most kMaxSeams, no allocation).
+  for (std::size_t i = 1; i < n; ++i) {
+    for (std::size_t j = i; j > 0 && candidates[j].d2 < candidates[j - 1].d2; --j) std::swap(candidates[j], candidates[j - 1]);
+  }
+  std::array<bool, kMaxPatches> placed{};
+  for (std::size_t i = 0; i < n; ++i) {
+    Candidate& c = candidates[i];
+    const FusionConfig::SeamBand& sb = config_.seams[c.seam];
+    if (placed[sb.seam.a] || placed[sb.seam.b]) continue;
+    if (!(c.d2 <= config_.gate_chi2)) {
       // Two places along the seam: one contact covering both (the main loop fuses identical estimates exactly).
-      const Eigen::Vector3d mean = 0.5 * (la.p_BC_m + lb.p_BC_m);
-      const Eigen::Vector3d half = 0.5 * (la.p_BC_m - lb.p_BC_m);
-      Eigen::Matrix3d P = 0.5 * (la.cov_p_BC_m2 + lb.cov_p_BC_m2) + half * half.transpose();
+      const Eigen::Vector3d mean = 0.5 * (c.la.p_BC_m + c.lb.p_BC_m);
+      const Eigen::Vector3d half = 0.5 * (c.la.p_BC_m - c.lb.p_BC_m);
+      Eigen::Matrix3d P = 0.5 * (c.la.cov_p_BC_m2 + c.lb.cov_p_BC_m2) + half * half.transpose();
       if (Regularize(P) != CovarianceStatus::kOk) continue;
-      la.p_BC_m = lb.p_BC_m = mean;
-      la.cov_p_BC_m2 = lb.cov_p_BC_m2 = P;
+      c.la.p_BC_m = c.lb.p_BC_m = mean;
+      c.la.cov_p_BC_m2 = c.lb.cov_p_BC_m2 = P;
       ++data.counters.seam_mixtures;
     }
-    data.lifted_[a] = la;
-    data.lifted_[b] = lb;
+    data.lifted_[sb.seam.a] = c.la;
+    data.lifted_[sb.seam.b] = c.lb;
+    placed[sb.seam.a] = placed[sb.seam.b] = true;
     ++data.counters.seam_pairs;
   }
 }

@@ -74,10 +74,14 @@ std::vector<Seam> FindSeams(std::span<const MountedSurface> patches) {
   for (std::size_t a = 0; a < patches.size(); ++a) {
     const MountedSurface& pa = patches[a];
     const patch::Geometry ga(pa.mount.surface_radius_mm);
-    const double out_deg = ga.RDeg(1.0), ym = 0.5 * pa.extent_y_mm, rm = 0.5 * pa.extent_r_deg;
-    const patch::SurfacePoint outside[4] = {{-1.0, rm}, {pa.extent_y_mm + 1.0, rm}, {ym, -out_deg},
-                                            {ym, pa.extent_r_deg + out_deg}};
-    for (std::size_t k = 0; k < 4; ++k) {
+    const double out_deg = ga.RDeg(1.0);
+    // Five points along each edge (10 to 90 % of it): covers that meet along part of an edge are found too.
+    for (std::size_t q = 0; q < 20; ++q) {
+      const std::size_t k = q / 5;
+      const double f = 0.1 + 0.2 * static_cast<double>(q % 5);
+      const double y = f * pa.extent_y_mm, r = f * pa.extent_r_deg;
+      const patch::SurfacePoint outside[4] = {{-1.0, r}, {pa.extent_y_mm + 1.0, r}, {y, -out_deg},
+                                              {y, pa.extent_r_deg + out_deg}};
       const Eigen::Vector3d p_L = PatchToLink(pa.mount, outside[k]).p_LS_m;
       for (std::size_t b = 0; b < patches.size(); ++b) {
         if (b == a) continue;

@@ -132,6 +132,11 @@ Config ConfigFromScene(const SceneFile& scene) {
     r.source = Source(*m, "this stop rule (what it costs in false stops and misses)");
     m->Finish();
   }
+  if (auto m = s.MapOr("seam_sum")) {
+    c.seam_sum.enabled = m->BoolOr("enabled", c.seam_sum.enabled);
+    c.seam_sum.source = Source(*m, "judging seam contacts on their sum (what it costs in false stops)");
+    m->Finish();
+  }
   if (auto m = s.MapOr("coverage")) {
     CoverageConfig& cov = c.coverage;
     cov.press_factor = m->NumberOr("press_factor", cov.press_factor, 1.0, 100.0);

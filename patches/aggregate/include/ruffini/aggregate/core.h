@@ -73,9 +73,6 @@ struct Setup {
   // The seams between the patches' covers and their bands (indices into `patches`; from the mounts and the
   // sensitivity maps at load, docs/fusion.md "Seams"). Used by the fusion when there is a robot.
   std::vector<fusion::FusionConfig::SeamBand> seams;
-  // A contact on a seam is judged on the sum of both sides' forces when the other side's newest contact is at
-  // most this much older or newer (frame times) and both may lie on the seam (docs/fusion.md, "Seams").
-  std::int64_t seam_sum_window_ns = 5'000'000;
 };
 
 // Joint-state rejections (counted, logged by the service; a rejected state is not used).
@@ -227,6 +224,7 @@ class Core {
     bool doubtful = false;                // the newest contact was refused as a doubt: shown unplaced, not fused
     v1::BodyContact contact;              // the newest contact, placed when possible
     v1::PatchContact surface;             // the newest contact as the decoder sent it (patch frame)
+    std::int64_t contact_arrival_ns = 0;  // when the newest good contact arrived (aggregator clock)
     v1::RetareResult last_retare;         // the newest re-tare result
     std::uint64_t retare_pending = 0;     // the request sent and not answered yet
     std::int64_t retare_sent_ns = 0;
@@ -241,7 +239,7 @@ class Core {
   v1::HelloRefusal CheckHello(std::size_t patch, const v1::PatchHello& h, std::string& message) const;
   void Bad(BadInput b) noexcept { ++counters_.bad_input[static_cast<std::size_t>(b)]; }
   safety::Rejection CheckContact(std::size_t patch, const v1::PatchMessage& m, std::int64_t now_ns) const;
-  void JudgeOnSeam(std::size_t patch, std::int64_t t_ns, const v1::PatchContact& c, safety::Contact& sc) noexcept;
+  void JudgeOnSeam(std::size_t patch, const v1::PatchContact& c, safety::Contact& sc, std::int64_t now_ns) noexcept;
   void DrainPolicyEvents(const std::string& operator_name = {});
   Reply ProtocolError(int stream, Stream& s, const std::string& why, std::int64_t now_ns,
                       safety::CauseKind kind = safety::CauseKind::kPatchProtocol);

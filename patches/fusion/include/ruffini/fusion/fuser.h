@@ -62,14 +62,31 @@ struct FusionConfig {
     robot::Seam seam;
     double band_a_mm = 0.0, band_b_mm = 0.0;
   };
-  std::vector<SeamBand> seams;
+  std::vector<SeamBand> seams;  // at most kMaxSeams
+  // Two contacts are one touch on their seam only if they agree along it: the distance between their places on
+  // the seam within the 95 % gate (1 dof) of their along-seam variances plus this floor's, per side (mm): the
+  // probe's footprint, and the edge decoders' along-seam sd being overconfident near a seam (docs/fusion.md).
+  double seam_along_floor_mm = 5.0;
 };
+
+inline constexpr std::size_t kMaxSeams = 64;
+inline constexpr double kChi2_1dof_95 = 3.841;
 
 // Both contacts may lie on their seam (docs/fusion.md, "Seams"): both located, each within its side's band of
 // the seam plus 2 sd of its own across it, and the seam has both bands. pa/ca are seam.a's, pb/cb seam.b's.
 // Real-time safe.
 [[nodiscard]] bool MayBeOnSeam(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const SurfaceContact& ca,
                                const FusionPatch& pb, const SurfaceContact& cb, const LiftConfig& lift) noexcept;
+
+// The squared gate distance (1 dof) between the two contacts' places along their seam, each moved onto it:
+// the distance between them over their along-seam variances plus 2 along_floor_mm^2. +inf for NaN.
+[[nodiscard]] double AlongSeamD2(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const SurfaceContact& ca,
+                                 const FusionPatch& pb, const SurfaceContact& cb, const LiftConfig& lift,
+                                 double along_floor_mm) noexcept;
+// One probe across the seam may explain both contacts: MayBeOnSeam, and they agree along the seam
+// (AlongSeamD2 <= kChi2_1dof_95 with config.seam_along_floor_mm). ca is seam.a's, cb seam.b's. Real-time safe.
+[[nodiscard]] bool OneTouchOnSeam(const FusionConfig& config, const FusionConfig::SeamBand& sb, const SurfaceContact& ca,
+                                  const SurfaceContact& cb) noexcept;
 
 // One patch's contact at this instant. `patch` indexes FusionConfig::patches (Fuser::FindPatch).
 struct PatchInput {

@@ -79,7 +79,7 @@ struct Seam {
   PatchEdge edge_a = PatchEdge::kRMax, edge_b = PatchEdge::kRMin;
 };
 
-// The seams among `patches`: a point 1 mm outside the middle of an edge of one patch that lies on another's
+// The seams among `patches`: a point 1 mm outside an edge of one patch (five along it, 10 to 90 %) on another's
 // surface (same link, within 1 mm of its cylinder, inside its extent and within 2 mm of one of its edges: not
 // an overlap) makes a seam between that edge and the other's edge nearest the point (each pair of edges once,
 // a < b). Covers meeting across a joint (two links) are not seams here. The same test sim::EffectsFor uses to make the twin's edge `continued`.

@@ -204,6 +204,13 @@ struct Config {
     float max_sd_n = 0.5f;     // sd_k < 0: an sd above this is not trusted and never lowers (a broken sd)
     std::string source;        // the scene's `source:` (empty: the default)
   } stop_rule{};
+  // `safety.seam_sum`: judge a contact that one touch on its seam may explain on the sum of both sides' forces
+  // (aggregate::Core::JudgeOnSeam, docs/fusion.md "The stop on a seam"). Off by default: it stops more seam
+  // probes but also two separate light touches near the seam (docs/experiments/seam.md).
+  struct SeamSum {
+    bool enabled = false;
+    std::string source;
+  } seam_sum{};
 };
 
 // The force a contact is judged at against its threshold: force_n + sd_k x sd. A non-finite or negative sd
