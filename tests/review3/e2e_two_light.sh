@@ -1,6 +1,6 @@
 #!/bin/bash
 # Bounded end-to-end run on loopback: aggregator, controller, sim, 4 decoders; stops what it started by pid.
-B=/work/wt-review3/build/release/bin; S=/work/wt-review3/config/scenes/cobot.yaml; D=/tmp/r3/e2e
+B=${B:-build/release/bin}; S=${S:-config/scenes/cobot.yaml}; D=${D:-/tmp/r3/e2e}   # run from the repository root
 rm -rf $D/agg $D/sim; mkdir -p $D/agg $D/sim
 pids=()
 cleanup() { for p in "${pids[@]}"; do kill -TERM $p 2>/dev/null; done; sleep 1; for p in "${pids[@]}"; do kill -KILL $p 2>/dev/null; done; }
