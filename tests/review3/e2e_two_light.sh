@@ -10,7 +10,7 @@ $B/ruffini-aggregator --insecure --scene $S --listen 127.0.0.1:0 --metrics 127.0
 sleep 0.5; cat $D/agg/ports 2>/dev/null
 AP=$(waitport $D/agg/ports grpc); MP=$(waitport $D/agg/ports metrics); echo "agg grpc $AP metrics $MP"
 $B/ruffini-controller --insecure --aggregator 127.0.0.1:$AP --robot cobot --amplitude-rad 0 --heartbeat-timeout-ms 1000 --freshness-budget-ms 1000 > $D/ctl.out 2> $D/ctl.err & pids+=($!)
-$B/ruffini-sim --scene $S --scenario /work/wt-review3/tests/review3/two-light.yaml --rate-hz 1000 --command-port 0 --stream-port 0 --ports-file $D/sim/ports > $D/sim/out 2> $D/sim/err & pids+=($!)
+$B/ruffini-sim --scene $S --scenario tests/review3/two-light.yaml --rate-hz 1000 --command-port 0 --stream-port 0 --ports-file $D/sim/ports > $D/sim/out 2> $D/sim/err & pids+=($!)
 SP=$(waitport $D/sim/ports stream); echo "sim stream $SP"
 for p in forearm_a forearm_b upper_arm_a upper_arm_b; do
   $B/ruffini-decoder --insecure --scene $S --patch $p --interrogator 127.0.0.1:$SP --aggregator 127.0.0.1:$AP --metrics 127.0.0.1:0 --rate-hz 1000 --silence-ms 100 --freshness-budget-ms 200 > $D/dec-$p.out 2> $D/dec-$p.err & pids+=($!)
