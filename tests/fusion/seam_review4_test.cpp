@@ -137,5 +137,23 @@ TEST(Review4SeamFusion, SeveralSeamsDoNotAllocate) {
   EXPECT_GT(w.data.counters.seam_pairs, 0u);
 }
 
+// FAILS at 2915829. FindSeams probes five points per edge and pairs each with the other patch's NEAREST edge
+// (within 2 mm). Two covers side by side around the limb (a's R 145 edge on b's R 0 edge) that meet along only
+// the last 15.5 mm of a (b mounted 134.5 mm further along): a's 90 % point (Y 135) lands 0.5 mm from b's Y 0
+// edge and 1 mm from its R 0 edge, so the seam is recorded as a R_max | b Y_min; from b's side, a Y_max | b R_min.
+// A seam between an R edge and a Y edge is no seam (perpendicular lines: OntoEdge moves the two contacts onto
+// lines that cross), and the real R | R seam is not found.
+TEST(Review4SeamFusion, ASeamPairsParallelEdges) {
+  std::vector<robot::MountedSurface> surfaces = {{Patch("a", "fore", 0.0, 40.0).mount, 150.0, 145.0},
+                                                 {Patch("b", "fore", 0.1345, 40.0, 145.0).mount, 150.0, 145.0}};
+  const auto seams = robot::FindSeams(surfaces);
+  auto is_y = [](robot::PatchEdge e) { return e == robot::PatchEdge::kYMin || e == robot::PatchEdge::kYMax; };
+  for (const auto& s : seams) {
+    std::printf("  seam %zu %s | %zu %s\n", s.a, robot::ToString(s.edge_a), s.b, robot::ToString(s.edge_b));
+    EXPECT_EQ(is_y(s.edge_a), is_y(s.edge_b)) << robot::ToString(s.edge_a) << " | " << robot::ToString(s.edge_b);
+  }
+  EXPECT_GE(seams.size(), 1u);
+}
+
 }  // namespace
 }  // namespace ruffini::fusion
