@@ -222,4 +222,40 @@ TEST_F(Review4Seam, AnOverflowingSumKeepsTheCauseFinite) {
       << "the cause's force " << core.SafetyState().cause().force_n() << ", seam_sums " << core.counters().seam_sums;
 }
 
+// FAILS at 2915829. Review 3's finding 2 by another road: one probe on the seam read 0.9 N by each side stops (the
+// sum, 1.8 N). The press goes on unchanged, but forearm_b's decoder can no longer place it (force-only frames,
+// located = false: what the decoder sends when its place or covariance is not finite, likely at a seam): such a
+// frame is never summed (JudgeOnSeam wants both located), so both sides are judged alone (0.9 N, below the
+// 1.35 N release level), both causes end after the 100 ms hold, and the reset is accepted while the same 1.8 N
+// press is on the seam. An unplaced contact may be anywhere on its patch, the seam included.
+TEST_F(Review4Seam, AnUnplacedSideDoesNotEndTheCauseOfAPressThatGoesOn) {
+  const auto streams = ClearAll();
+  for (int k = 0; k < 5; ++k) {
+    tc += kMs;
+    Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+    Send(streams[1], 1, Located(0.9f, 75, 15, tc), tc);
+  }
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+  v1::PatchMessage unplaced;
+  unplaced.mutable_contact()->set_force_n(0.9f);
+  unplaced.mutable_contact()->set_uncertainty_calibrated(true);
+  unplaced.mutable_contact()->set_force_sd_n(0.05f);
+  for (int k = 0; k < 300; ++k) {
+    tc += kMs;
+    Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+    unplaced.set_t_ns(tc);
+    Send(streams[1], 1, unplaced, tc);
+    if (k % 10 == 0) {
+      core.OnJointState(Joints(tc), tc);
+      for (std::size_t i = 0; i < streams.size(); ++i) Heartbeat(streams[i], i, tc, i < 2);
+      core.Tick(tc);
+    }
+  }
+  const auto r = Reset();
+  EXPECT_FALSE(r.accepted()) << "reset accepted while a 0.9 + 0.9 N press on the seam goes on: " << r.message();
+  tc += kMs;
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  EXPECT_NE(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR) << "CLEAR with the press still on the seam";
+}
+
 }  // namespace
