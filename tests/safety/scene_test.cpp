@@ -3,6 +3,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -222,6 +224,21 @@ TEST_F(SafetyScene, SeamSumIsOffUnlessTheSceneSaysWhy) {
   EXPECT_EQ(c.seam_sum.source, "measured");
   const std::string p = Write("arm", "arm", kArm, "  seam_sum: {enabled: true}\n");
   EXPECT_NE(Message(p).find("'safety.seam_sum.source' is missing"), std::string::npos) << Message(p);
+}
+
+// Review 4: safety.seam_sum is parsed strictly: an unknown key and a bad value are errors, the default is off.
+TEST_F(SafetyScene, Review4SeamSumIsParsedStrictly) {
+  std::string p = Write("arm", "arm", kArm, "  seam_sum: {enabled: true, source: measured, window_ms: 5}\n");
+  EXPECT_NE(Message(p).find("window_ms"), std::string::npos) << Message(p);
+  p = Write("arm", "arm", kArm, "  seam_sum: {enabled: 2, source: measured}\n");
+  EXPECT_NE(Message(p).find("must be true or false"), std::string::npos) << Message(p);
+  p = Write("arm", "arm", kArm, "  seam_sum: true\n");
+  EXPECT_NE(Message(p), "(no error)");
+  // yaml-cpp's booleans: "yes"/"on" read as true (as every other BoolOr in the scene). Printed, not judged.
+  p = Write("arm", "arm", kArm, "  seam_sum: {enabled: on, source: measured}\n");
+  const std::string m = Message(p);
+  std::printf("seam_sum enabled: on -> %s\n", m == "(no error)" ? (ConfigFromScene(p).seam_sum.enabled ? "true" : "false") : m.c_str());
+  EXPECT_FALSE(ConfigFromScene(Write("arm", "arm", kArm, "  seam_sum: {source: only why}\n")).seam_sum.enabled);
 }
 
 TEST_F(SafetyScene, ContactReleaseAndInputLimitsAreValidated) {
