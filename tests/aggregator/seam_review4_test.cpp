@@ -1,6 +1,6 @@
 // Review 4 probes of review 3's fixes to the stop on a seam (commit 2915829, aggregate::Core::JudgeOnSeam):
 // pairing by arrival within the silence deadline, a side out of contact by heartbeat, a re-connected side, an
-// overflowing sum. Each test states what the safety rules require; "FAILS at 2915829" marks a finding.
+// overflowing sum. Each test states what the safety rules require; "FAILED at 2915829" marks a finding; all pass since the fixes.
 #include <gtest/gtest.h>
 
 #include <cfloat>
@@ -203,7 +203,7 @@ TEST_F(Review4Seam, OldFramesThatKeepArrivingAreSummedOnlyUpwards) {
   EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
 }
 
-// FAILS at 2915829. The sum may overflow a float: two finite readings of 3e38 N (no upper limit on a contact's
+// FAILED at 2915829 (passes since the fix). The sum may overflow a float: two finite readings of 3e38 N (no upper limit on a contact's
 // force; each alone stops as a contact) sum to +inf, which the policy then refuses as a non-finite force (a
 // doubt): the published cause says force -1 N (the placeholder for a non-finite force). Safety holds (STOP); the
 // cause is wrong (a STOP of 6e38 N reported as -1 N, a "non-finite force" the decoders never sent).
@@ -222,7 +222,7 @@ TEST_F(Review4Seam, AnOverflowingSumKeepsTheCauseFinite) {
       << "the cause's force " << core.SafetyState().cause().force_n() << ", seam_sums " << core.counters().seam_sums;
 }
 
-// FAILS at 2915829. Review 3's finding 2 by another road: one probe on the seam read 0.9 N by each side stops (the
+// FAILED at 2915829 (passes since the fix). Review 3's finding 2 by another road: one probe on the seam read 0.9 N by each side stops (the
 // sum, 1.8 N). The press goes on unchanged, but forearm_b's decoder can no longer place it (force-only frames,
 // located = false: what the decoder sends when its place or covariance is not finite, likely at a seam): such a
 // frame is never summed (JudgeOnSeam wants both located), so both sides are judged alone (0.9 N, below the

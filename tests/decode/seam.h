@@ -18,6 +18,17 @@
 
 namespace ruffini::testing {
 
+// Whether aggregate::Core::JudgeOnSeam sums the two sides' forces (its rule, for in-process rigs): both located
+// and one touch on the seam may explain both, or one side unplaced (force only) and the located side may be on
+// the seam. ca is seam.a's contact, cb seam.b's.
+inline bool SeamSumApplies(const fusion::FusionConfig& fc, const fusion::FusionConfig::SeamBand& sb,
+                           const fusion::SurfaceContact& ca, const fusion::SurfaceContact& cb) {
+  if (ca.located && cb.located) return fusion::OneTouchOnSeam(fc, sb, ca, cb);
+  if (ca.located) return fusion::SideMayBeOnSeam(sb, true, fc.patches[sb.seam.a], ca, fc.lift);
+  if (cb.located) return fusion::SideMayBeOnSeam(sb, false, fc.patches[sb.seam.b], cb, fc.lift);
+  return false;
+}
+
 // What the aggregator's fusion made of one hold frame of a seam probe.
 struct SeamFrame {
   int patches_in_contact = 0;  // 0, 1 or 2 of the seam's patches reported a contact
@@ -164,7 +175,7 @@ class SeamRig {
     f.judged_n = f.own_max_n;
     const fusion::FusionConfig& fc = fuser_->config();
     if (in.size() == 2 && !fc.seams.empty() &&
-        fusion::OneTouchOnSeam(fc, fc.seams[0], in.front().contact, in.back().contact)) {
+        SeamSumApplies(fc, fc.seams[0], in.front().contact, in.back().contact)) {
       f.judged_n = std::max(f.judged_n, sum);
     }
     fuser_->Update(in, fk_.X_BL, data);

@@ -122,7 +122,7 @@ int main(int argc, char** argv) {
           const link::Contact& cb = ob.hold[static_cast<std::size_t>(it - ob.hold_t_ns.begin())];
           const fusion::SurfaceContact a = testing::SeamRig::Surface(oa.hold[x]), b = testing::SeamRig::Surface(cb);
           ++both_here;
-          const bool on = fusion::OneTouchOnSeam(fc, fc.seams[0], a, b);
+          const bool on = testing::SeamSumApplies(fc, fc.seams[0], a, b);
           if (on && a.force_n + b.force_n > threshold && std::max(a.force_n, b.force_n) <= threshold) {
             sum_stop = true;
             ++sum_frames;

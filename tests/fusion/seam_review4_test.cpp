@@ -1,5 +1,5 @@
 // Review 4 probes of review 3's fixes to the seam fusion (commit 2915829, Fuser::PlaceOnSeams): the best-partner
-// ordering, the across-seam sd on extreme covariances, allocation with several seams. "FAILS at 2915829" marks a
+// ordering, the across-seam sd on extreme covariances, allocation with several seams. "FAILED at 2915829" (all pass since the fixes) marks a
 // finding.
 #include <gtest/gtest.h>
 
@@ -76,7 +76,7 @@ FusionConfig Ring() {
   return c;
 }
 
-// FAILS at 2915829. "A patch on several seams goes with its best-agreeing partner" (docs/fusion.md): the pairs
+// FAILED at 2915829 (passes since the fix). "A patch on several seams goes with its best-agreeing partner" (docs/fusion.md): the pairs
 // are ordered by their Mahalanobis distance, which a vague contact makes small whatever it says. p0's share of a
 // probe on seam p3|p0 (Y 75, sd 2 mm); p3's share 3 mm off along the seam (sd 2 mm: d2 about 1, well inside
 // the gate); a separate touch on p1 near seam p0|p1, 25 mm off along it but with a 60 mm sd along Y: its d2 is
@@ -138,7 +138,7 @@ TEST(Review4SeamFusion, SeveralSeamsDoNotAllocate) {
   EXPECT_GT(w.data.counters.seam_pairs, 0u);
 }
 
-// FAILS at 2915829. FindSeams probes five points per edge and pairs each with the other patch's NEAREST edge
+// FAILED at 2915829 (passes since the fix). FindSeams probes five points per edge and pairs each with the other patch's NEAREST edge
 // (within 2 mm). Two covers side by side around the limb (a's R 145 edge on b's R 0 edge) that meet along only
 // the last 15.5 mm of a (b mounted 134.5 mm further along): a's 90 % point (Y 135) lands 0.5 mm from b's Y 0
 // edge and 1 mm from its R 0 edge, so the seam is recorded as a R_max | b Y_min; from b's side, a Y_max | b R_min.
@@ -156,7 +156,7 @@ TEST(Review4SeamFusion, ASeamPairsParallelEdges) {
   EXPECT_GE(seams.size(), 1u);
 }
 
-// FAILS at 2915829. kMaxSeams (64) is below what kMaxPatches (64) patches may have: a forearm tiled 4 around x 9
+// FAILED at 2915829 (passes since the fix). kMaxSeams (64) is below what kMaxPatches (64) patches may have: a forearm tiled 4 around x 9
 // along (36 patches, 30 mm long each) has 36 seams around and 32 along. Fuser throws at construction, so the
 // aggregator of such a scene no longer starts -- even with safety.seam_sum off (the default), and although the
 // scene ran before 2915829. Fail-closed, but a regression the docs do not mention (docs/fusion.md: "at most").

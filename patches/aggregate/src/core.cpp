@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include "ruffini/error.h"
@@ -130,24 +131,35 @@ Core::Core(Setup setup, std::int64_t now_ns)
 // the press goes on). Only the force is raised; the contact's own sd stays (the stop rule never judges the sum
 // lower than the contact alone, and a sd it cannot read stays unreadable).
 void Core::JudgeOnSeam(std::size_t pi, const v1::PatchContact& c, safety::Contact& sc, std::int64_t now_ns) noexcept {
-  if (!setup_.safety.seam_sum.enabled || !fuser_ || !c.located() || !std::isfinite(c.force_n())) return;
+  if (!setup_.safety.seam_sum.enabled || !fuser_ || !std::isfinite(c.force_n())) return;
   const fusion::FusionConfig& fc = fuser_->config();
-  float best = sc.force_n;
+  double best = sc.force_n;
   for (const fusion::FusionConfig::SeamBand& sb : fc.seams) {
     if (sb.seam.a != pi && sb.seam.b != pi) continue;
-    const std::size_t pj = sb.seam.a == pi ? sb.seam.b : sb.seam.a;
+    const bool mine_is_a = sb.seam.a == pi;
+    const std::size_t pj = mine_is_a ? sb.seam.b : sb.seam.a;
     const PatchLink& other = links_[pj];
-    if (other.stream < 0 || !other.in_contact || other.doubtful || !other.surface.located()) continue;
+    if (other.stream < 0 || !other.in_contact || other.doubtful) continue;
     if (now_ns - other.contact_arrival_ns > setup_.safety.patches[pj].silence_deadline_ns) continue;
     const float f_other = other.surface.force_n();
     if (!std::isfinite(f_other) || f_other <= 0) continue;
     const fusion::SurfaceContact mine = SurfaceOf(c), theirs = SurfaceOf(other.surface);
-    const bool one = sb.seam.a == pi ? fusion::OneTouchOnSeam(fc, sb, mine, theirs) : fusion::OneTouchOnSeam(fc, sb, theirs, mine);
+    bool one = false;
+    if (mine.located && theirs.located) {
+      one = mine_is_a ? fusion::OneTouchOnSeam(fc, sb, mine, theirs) : fusion::OneTouchOnSeam(fc, sb, theirs, mine);
+    } else if (mine.located || theirs.located) {
+      // A side that does not place its touch (force only) may be anywhere on its patch, the seam included: the
+      // located side decides (review 4: an unplaced side must not end the sum while the press goes on).
+      one = mine.located ? fusion::SideMayBeOnSeam(sb, mine_is_a, fc.patches[pi], mine, fc.lift)
+                         : fusion::SideMayBeOnSeam(sb, !mine_is_a, fc.patches[pj], theirs, fc.lift);
+    }
     if (!one) continue;
-    best = std::max(best, c.force_n() + f_other);
+    // In double, clamped: two huge finite readings must not add up to +inf (a non-finite force is refused).
+    best = std::max(best, std::min(static_cast<double>(std::numeric_limits<float>::max()),
+                                   static_cast<double>(c.force_n()) + static_cast<double>(f_other)));
   }
   if (best > sc.force_n) {
-    sc.force_n = best;
+    sc.force_n = static_cast<float>(best);
     ++counters_.seam_sums;
   }
 }

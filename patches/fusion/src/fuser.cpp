@@ -153,6 +153,15 @@ bool MayBeOnSeam(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const 
          db - 2.0 * std::sqrt(AcrossEdgeVariance(cb, sb.seam.edge_b, lift)) <= sb.band_b_mm;
 }
 
+bool SideMayBeOnSeam(const FusionConfig::SeamBand& sb, bool side_a, const FusionPatch& p, const SurfaceContact& c,
+                     const LiftConfig& lift) noexcept {
+  const double band = side_a ? sb.band_a_mm : sb.band_b_mm;
+  const robot::PatchEdge edge = side_a ? sb.seam.edge_a : sb.seam.edge_b;
+  if (!(sb.band_a_mm > 0 && sb.band_b_mm > 0) || !c.located) return false;
+  const double d = robot::DistanceToEdgeMm(SurfaceOf(p), edge, {c.y_mm, c.r_deg});
+  return d - 2.0 * std::sqrt(AcrossEdgeVariance(c, edge, lift)) <= band;  // NaN: false
+}
+
 double AlongSeamD2(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const SurfaceContact& ca,
                    const FusionPatch& pb, const SurfaceContact& cb, const LiftConfig& lift,
                    double along_floor_mm) noexcept {
@@ -187,27 +196,17 @@ bool OneTouchOnSeam(const FusionConfig& config, const FusionConfig::SeamBand& sb
 // the spread), one contact whose covariance holds both places, as for two touches on one patch. A patch on
 // several seams is placed on at most one: the candidate pairs are taken in ascending gate distance.
 void Fuser::PlaceOnSeams(std::span<const Eigen::Isometry3d> X_BL, FusionData& data) const noexcept {
-  struct Candidate {
-    std::size_t seam = 0;
-    double d2 = 0.0;
-    LiftedContact la, lb;
-  };
-  std::array<Candidate, kMaxSeams> candidates;
-  std::size_t n = 0;
-  for (std::size_t k = 0; k < config_.seams.size() && n < kMaxSeams; ++k) {
+  // Both contacts of seam k moved onto it (false: one could not be lifted).
+  auto place = [&](std::size_t k, LiftedContact& la, LiftedContact& lb) {
     const FusionConfig::SeamBand& sb = config_.seams[k];
     const std::size_t a = sb.seam.a, b = sb.seam.b;
-    if (!data.have_[a] || !data.have_[b]) continue;
     const SurfaceContact& ca = data.input_[a];
     const SurfaceContact& cb = data.input_[b];
-    const FusionPatch& pa = config_.patches[a];
-    const FusionPatch& pb = config_.patches[b];
-    if (!MayBeOnSeam(sb, pa, ca, pb, cb, config_.lift)) continue;
     const double sd_a = std::sqrt(AcrossEdgeVariance(ca, sb.seam.edge_a, config_.lift));
     const double sd_b = std::sqrt(AcrossEdgeVariance(cb, sb.seam.edge_b, config_.lift));
     const double across_sd_mm = 0.5 * std::max(sb.band_a_mm + 2.0 * sd_a, sb.band_b_mm + 2.0 * sd_b);
-    auto lift_onto_seam = [&](const FusionPatch& p, std::size_t i, robot::PatchEdge edge, const SurfaceContact& c,
-                              LiftedContact& out) {
+    auto lift_onto_seam = [&](std::size_t i, robot::PatchEdge edge, const SurfaceContact& c, LiftedContact& out) {
+      const FusionPatch& p = config_.patches[i];
       const double along = AlongEdgeVariance(c, edge, config_.lift);
       const double across = across_sd_mm * across_sd_mm;
       const bool r_edge = edge == robot::PatchEdge::kRMin || edge == robot::PatchEdge::kRMax;
@@ -216,39 +215,56 @@ void Fuser::PlaceOnSeams(std::span<const Eigen::Isometry3d> X_BL, FusionData& da
       C(1, 1) = r_edge ? across : along;
       return Lift(p, X_BL[patch_link_[i]], OntoEdge(p, edge, c), config_.lift, out, &C);
     };
-    Candidate& cand = candidates[n];
-    if (lift_onto_seam(pa, a, sb.seam.edge_a, ca, cand.la) != Rejection::kNone ||
-        lift_onto_seam(pb, b, sb.seam.edge_b, cb, cand.lb) != Rejection::kNone) {
-      continue;
-    }
-    if (cand.la.n_B.dot(cand.lb.n_B) < cos_max_normal_angle_) continue;
-    cand.seam = k;
-    cand.d2 = TangentMahalanobis2({cand.la.p_BC_m, cand.la.cov_p_BC_m2}, {cand.lb.p_BC_m, cand.lb.cov_p_BC_m2},
-                                  cand.la.n_B + cand.lb.n_B);
-    if (!std::isfinite(cand.d2)) cand.d2 = std::numeric_limits<double>::infinity();
-    ++n;
+    return lift_onto_seam(a, sb.seam.edge_a, ca, la) == Rejection::kNone &&
+           lift_onto_seam(b, sb.seam.edge_b, cb, lb) == Rejection::kNone &&
+           la.n_B.dot(lb.n_B) >= cos_max_normal_angle_;
+  };
+  // The candidates: seams whose two contacts may lie on them, ranked by how well they agree along the seam
+  // (those passing the gate first, then by the distance between their places on the seam, mm): a vague
+  // partner's wide covariance must not win over one that is where this contact is.
+  struct Candidate {
+    std::size_t seam = 0;
+    bool gated = false;
+    double distance_mm = 0.0;
+  };
+  std::array<Candidate, kMaxSeams> candidates;
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < config_.seams.size() && n < kMaxSeams; ++k) {
+    const FusionConfig::SeamBand& sb = config_.seams[k];
+    const std::size_t a = sb.seam.a, b = sb.seam.b;
+    if (!data.have_[a] || !data.have_[b]) continue;
+    if (!MayBeOnSeam(sb, config_.patches[a], data.input_[a], config_.patches[b], data.input_[b], config_.lift)) continue;
+    LiftedContact la, lb;
+    if (!place(k, la, lb)) continue;
+    const double d2 = TangentMahalanobis2({la.p_BC_m, la.cov_p_BC_m2}, {lb.p_BC_m, lb.cov_p_BC_m2}, la.n_B + lb.n_B);
+    const double dist = (la.p_BC_m - lb.p_BC_m).norm() * 1e3;
+    candidates[n++] = Candidate{k, d2 <= config_.gate_chi2, std::isfinite(dist) ? dist : std::numeric_limits<double>::infinity()};
   }
-  // Best pairs first (insertion sort: at most kMaxSeams, no allocation).
-  for (std::size_t i = 1; i < n; ++i) {
-    for (std::size_t j = i; j > 0 && candidates[j].d2 < candidates[j - 1].d2; --j) std::swap(candidates[j], candidates[j - 1]);
+  auto before = [](const Candidate& x, const Candidate& y) {
+    return x.gated != y.gated ? x.gated : x.distance_mm < y.distance_mm;
+  };
+  for (std::size_t i = 1; i < n; ++i) {  // insertion sort: few candidates, no allocation
+    for (std::size_t j = i; j > 0 && before(candidates[j], candidates[j - 1]); --j) std::swap(candidates[j], candidates[j - 1]);
   }
   std::array<bool, kMaxPatches> placed{};
   for (std::size_t i = 0; i < n; ++i) {
-    Candidate& c = candidates[i];
+    const Candidate& c = candidates[i];
     const FusionConfig::SeamBand& sb = config_.seams[c.seam];
     if (placed[sb.seam.a] || placed[sb.seam.b]) continue;
-    if (!(c.d2 <= config_.gate_chi2)) {
+    LiftedContact la, lb;
+    if (!place(c.seam, la, lb)) continue;
+    if (!c.gated) {
       // Two places along the seam: one contact covering both (the main loop fuses identical estimates exactly).
-      const Eigen::Vector3d mean = 0.5 * (c.la.p_BC_m + c.lb.p_BC_m);
-      const Eigen::Vector3d half = 0.5 * (c.la.p_BC_m - c.lb.p_BC_m);
-      Eigen::Matrix3d P = 0.5 * (c.la.cov_p_BC_m2 + c.lb.cov_p_BC_m2) + half * half.transpose();
+      const Eigen::Vector3d mean = 0.5 * (la.p_BC_m + lb.p_BC_m);
+      const Eigen::Vector3d half = 0.5 * (la.p_BC_m - lb.p_BC_m);
+      Eigen::Matrix3d P = 0.5 * (la.cov_p_BC_m2 + lb.cov_p_BC_m2) + half * half.transpose();
       if (Regularize(P) != CovarianceStatus::kOk) continue;
-      c.la.p_BC_m = c.lb.p_BC_m = mean;
-      c.la.cov_p_BC_m2 = c.lb.cov_p_BC_m2 = P;
+      la.p_BC_m = lb.p_BC_m = mean;
+      la.cov_p_BC_m2 = lb.cov_p_BC_m2 = P;
       ++data.counters.seam_mixtures;
     }
-    data.lifted_[sb.seam.a] = c.la;
-    data.lifted_[sb.seam.b] = c.lb;
+    data.lifted_[sb.seam.a] = la;
+    data.lifted_[sb.seam.b] = lb;
     placed[sb.seam.a] = placed[sb.seam.b] = true;
     ++data.counters.seam_pairs;
   }

@@ -94,7 +94,10 @@ std::vector<Seam> FindSeams(std::span<const MountedSurface> patches) {
         if (s.y_mm < 0 || s.y_mm > pb.extent_y_mm || s.r_deg < 0 || s.r_deg > pb.extent_r_deg) continue;
         PatchEdge nearest = PatchEdge::kYMin;
         double d_min = std::numeric_limits<double>::infinity();
+        // Only an edge parallel to this one (Y with Y, R with R): near a corner the nearest edge may be the other kind.
+        const bool r_edge = k >= 2;
         for (const PatchEdge e : {PatchEdge::kYMin, PatchEdge::kYMax, PatchEdge::kRMin, PatchEdge::kRMax}) {
+          if ((e == PatchEdge::kRMin || e == PatchEdge::kRMax) != r_edge) continue;
           const double d = DistanceToEdgeMm(pb, e, s);
           if (d < d_min) {
             d_min = d;

@@ -69,7 +69,7 @@ struct FusionConfig {
   double seam_along_floor_mm = 5.0;
 };
 
-inline constexpr std::size_t kMaxSeams = 64;
+inline constexpr std::size_t kMaxSeams = 4 * 64;  // four edges per patch, kMaxPatches patches
 inline constexpr double kChi2_1dof_95 = 3.841;
 
 // Both contacts may lie on their seam (docs/fusion.md, "Seams"): both located, each within its side's band of
@@ -78,6 +78,9 @@ inline constexpr double kChi2_1dof_95 = 3.841;
 [[nodiscard]] bool MayBeOnSeam(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const SurfaceContact& ca,
                                const FusionPatch& pb, const SurfaceContact& cb, const LiftConfig& lift) noexcept;
 
+// One side's contact may lie on the seam: located, within that side's band plus 2 sd of its own across it.
+[[nodiscard]] bool SideMayBeOnSeam(const FusionConfig::SeamBand& sb, bool side_a, const FusionPatch& p,
+                                   const SurfaceContact& c, const LiftConfig& lift) noexcept;
 // The squared gate distance (1 dof) between the two contacts' places along their seam, each moved onto it:
 // the distance between them over their along-seam variances plus 2 along_floor_mm^2. +inf for NaN.
 [[nodiscard]] double AlongSeamD2(const FusionConfig::SeamBand& sb, const FusionPatch& pa, const SurfaceContact& ca,
