@@ -4,6 +4,7 @@
 // that commit by design (docs: docs/safety.md "On a seam" says the sum "only ever raises the force judged").
 #include <gtest/gtest.h>
 
+#include <cfloat>
 #include <cmath>
 #include <map>
 
@@ -273,6 +274,124 @@ TEST_F(Review3Seam, AStaleOtherSideIsNotSummedWhateverTheFrameTimes) {
   tc += kMs;
   Send(streams[1], 1, Located(0.9f, 75, 15, 0), tc);
   EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+}
+
+// --- Review 4 (of review 3's fixes, commit 2915829): pairing by arrival within the silence deadline, a side out of
+// contact by heartbeat, a re-connected side, an unplaced side, an overflowing sum. "FAILED at 2915829" marks its
+// findings; all pass since the fixes. Same fixture.
+using Review4Seam = Review3Seam;
+
+// Passes: forearm_b's decoder closes its gate by a healthy heartbeat (in_contact false), not by a released frame;
+// its last contact (0.9 N on the seam, 1 ms old, well within the 30 ms deadline) must no longer be summed.
+TEST_F(Review4Seam, ASideOutOfContactByHeartbeatIsNotSummed) {
+  const auto streams = ClearAll();
+  tc += kMs;
+  Send(streams[1], 1, Located(0.9f, 75, 15, tc), tc);
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  tc += kMs;
+  Heartbeat(streams[1], 1, tc, /*in_contact=*/false);
+  tc += kMs;
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  EXPECT_EQ(core.counters().seam_sums, 0u);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+}
+
+// Passes: a released frame from forearm_b ends its contact; not summed.
+TEST_F(Review4Seam, AReleasedSideIsNotSummed) {
+  const auto streams = ClearAll();
+  tc += kMs;
+  Send(streams[1], 1, Located(0.9f, 75, 15, tc), tc);
+  tc += kMs;
+  auto rel = Located(0.9f, 75, 15, tc);
+  rel.mutable_contact()->set_released(true);
+  Send(streams[1], 1, rel, tc);
+  tc += kMs;
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  EXPECT_EQ(core.counters().seam_sums, 0u);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+}
+
+// Passes: forearm_b re-connects (a new hello on a new stream takes over the patch): the old stream's contact is
+// not the new stream's, and is never summed.
+TEST_F(Review4Seam, AReconnectedSidesOldContactIsNotSummed) {
+  auto streams = ClearAll();
+  tc += kMs;
+  Send(streams[1], 1, Located(0.9f, 75, 15, tc), tc);
+  tc += kMs;
+  core.CloseStream(streams[1], tc);
+  tc += kMs;
+  streams[1] = Connect(1, tc);
+  tc += kMs;
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  EXPECT_EQ(core.counters().seam_sums, 0u);
+}
+
+// Passes (documents, safe direction): forearm_b's frames keep arriving but all carry the same frame time, 1.5 s
+// old (inside the 2 s skew): pairing by arrival sums them. Only ever raises: a STOP, never a CLEAR.
+TEST_F(Review4Seam, OldFramesThatKeepArrivingAreSummedOnlyUpwards) {
+  const auto streams = ClearAll();
+  const std::int64_t old = tc - 1'500 * kMs;
+  tc += kMs;
+  Send(streams[1], 1, Located(0.9f, 75, 15, old), tc);
+  tc += kMs;
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  EXPECT_GE(core.counters().seam_sums, 1u);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+}
+
+// FAILED at 2915829 (passes since the fix). The sum may overflow a float: two finite readings of 3e38 N (no upper limit on a contact's
+// force; each alone stops as a contact) sum to +inf, which the policy then refuses as a non-finite force (a
+// doubt): the published cause says force -1 N (the placeholder for a non-finite force). Safety holds (STOP); the
+// cause is wrong (a STOP of 6e38 N reported as -1 N, a "non-finite force" the decoders never sent).
+TEST_F(Review4Seam, AnOverflowingSumKeepsTheCauseFinite) {
+  const auto streams = ClearAll();
+  tc += kMs;
+  Send(streams[1], 1, Located(3e38f, 75, 15, tc), tc);
+  const auto epoch = core.SafetyState().stop_epoch();
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+  tc += kMs;
+  Send(streams[0], 0, Located(3e38f, 75, 130, tc), tc);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+  EXPECT_GT(core.SafetyState().stop_epoch(), epoch) << "forearm_a's own cause";
+  // The cause "carries that sum" (docs/safety.md): at least forearm_a's own 3e38 N, never a -1 placeholder.
+  EXPECT_GE(core.SafetyState().cause().force_n(), 3e38f)
+      << "the cause's force " << core.SafetyState().cause().force_n() << ", seam_sums " << core.counters().seam_sums;
+}
+
+// FAILED at 2915829 (passes since the fix). Review 3's finding 2 by another road: one probe on the seam read 0.9 N by each side stops (the
+// sum, 1.8 N). The press goes on unchanged, but forearm_b's decoder can no longer place it (force-only frames,
+// located = false: what the decoder sends when its place or covariance is not finite, likely at a seam): such a
+// frame is never summed (JudgeOnSeam wants both located), so both sides are judged alone (0.9 N, below the
+// 1.35 N release level), both causes end after the 100 ms hold, and the reset is accepted while the same 1.8 N
+// press is on the seam. An unplaced contact may be anywhere on its patch, the seam included.
+TEST_F(Review4Seam, AnUnplacedSideDoesNotEndTheCauseOfAPressThatGoesOn) {
+  const auto streams = ClearAll();
+  for (int k = 0; k < 5; ++k) {
+    tc += kMs;
+    Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+    Send(streams[1], 1, Located(0.9f, 75, 15, tc), tc);
+  }
+  ASSERT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+  v1::PatchMessage unplaced;
+  unplaced.mutable_contact()->set_force_n(0.9f);
+  unplaced.mutable_contact()->set_uncertainty_calibrated(true);
+  unplaced.mutable_contact()->set_force_sd_n(0.05f);
+  for (int k = 0; k < 300; ++k) {
+    tc += kMs;
+    Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+    unplaced.set_t_ns(tc);
+    Send(streams[1], 1, unplaced, tc);
+    if (k % 10 == 0) {
+      core.OnJointState(Joints(tc), tc);
+      for (std::size_t i = 0; i < streams.size(); ++i) Heartbeat(streams[i], i, tc, i < 2);
+      core.Tick(tc);
+    }
+  }
+  const auto r = Reset();
+  EXPECT_FALSE(r.accepted()) << "reset accepted while a 0.9 + 0.9 N press on the seam goes on: " << r.message();
+  tc += kMs;
+  Send(streams[0], 0, Located(0.9f, 75, 130, tc), tc);
+  EXPECT_NE(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR) << "CLEAR with the press still on the seam";
 }
 
 }  // namespace
