@@ -129,8 +129,16 @@ ModelAndData LoadModelAndData(const std::string& model_path, const std::string& 
 }
 
 eval::StreamPredictions DecodeWithProgress(const v1::DecoderModel& m, const patch::PatchSpec& spec, const dataset::Dataset& d,
-                                           const std::string& label, decode::PipelineConfig cfg = {}) {
+                                           const std::string& label, decode::PipelineConfig cfg = {},
+                                           const std::string& thermal_field = "model") {
+  const decode::BaselineConfig knobs = cfg.baseline;  // the caller's thermal-field knobs stay
   cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
+  if (thermal_field != "model") cfg.baseline.thermal_field = thermal_field == "on";
+  cfg.baseline.field_tau_s = knobs.field_tau_s;
+  cfg.baseline.field_trim = knobs.field_trim;
+  cfg.baseline.field_exclude_mm = knobs.field_exclude_mm;
+  cfg.baseline.field_max_rate_pm_s = knobs.field_max_rate_pm_s;
+  cfg.baseline.field_far_tau_s = knobs.field_far_tau_s;
   const decode::Pipeline<float> pipe(m, spec, cfg);
   std::unique_ptr<ProgressBar> bar;
   auto pred = eval::DecodeStream(pipe, d, [&](std::uint64_t done, std::uint64_t total) {
@@ -153,6 +161,8 @@ void RegisterEvaluate(CLI::App& app) {
     double quiet_drop = decode::PipelineConfig{}.quiet_release_drop;
     double faint_pm = decode::PipelineConfig{}.faint_pm;
     bool faint_refuse = decode::PipelineConfig{}.faint_refuse;
+    decode::BaselineConfig field;
+    std::string thermal_field = "model";
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("evaluate", "Evaluate a model: decode as one stream, score honestly and as the paper did; write a report folder");
@@ -178,6 +188,20 @@ void RegisterEvaluate(CLI::App& app) {
       ->check(CLI::Range(0.0, 100.0))->capture_default_str();
   cmd->add_flag("--faint-refuse,!--no-faint-refuse", a->faint_refuse,
                 "A faint frame below faint_max_n is no contact, and the baseline keeps tracking")->capture_default_str();
+  cmd->add_option("--thermal-field", a->thermal_field,
+                  "The baseline follows a thermal field across the patch: as the model says, on or off (docs/decoders.md)")
+      ->check(CLI::IsMember({"model", "on", "off"}))->capture_default_str();
+  cmd->add_option("--field-tau-s", a->field.field_tau_s, "Thermal field: the follower's time constant, s")
+      ->check(CLI::Range(0.01, 1e4))->capture_default_str();
+  cmd->add_option("--field-trim", a->field.field_trim, "Thermal field: gratings furthest from a first fit left out")
+      ->check(CLI::Range(0, 10))->capture_default_str();
+  cmd->add_option("--field-exclude-mm", a->field.field_exclude_mm, "Thermal field: gratings this near a placed touch left out")
+      ->check(CLI::Range(0.0, 500.0))->capture_default_str();
+  cmd->add_option("--field-far-tau-s", a->field.field_far_tau_s,
+                 "Thermal field, touched: a grating far from the touch follows its own wavelength with this, s")
+      ->check(CLI::Range(0.01, 1e4))->capture_default_str();
+  cmd->add_option("--field-max-rate", a->field.field_max_rate_pm_s, "Thermal field: largest step per grating, pm/s")
+      ->check(CLI::Range(0.0, 1e4))->capture_default_str();
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
     const ModelAndData md = LoadModelAndData(a->model, a->data, a->patch_spec);
@@ -199,7 +223,8 @@ void RegisterEvaluate(CLI::App& app) {
     pcfg.quiet_release_drop = a->quiet_drop;
     pcfg.faint_pm = a->faint_pm;
     pcfg.faint_refuse = a->faint_refuse;
-    const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", pcfg);
+    pcfg.baseline = a->field;
+    const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", pcfg, a->thermal_field);
     const auto mask = eval::MaskOfIndentations(d, test);
     eval::Predictions pred;
     pred.force_n.resize(d.size());
@@ -221,7 +246,7 @@ void RegisterEvaluate(CLI::App& app) {
       const std::string label = item.substr(0, eq), path = item.substr(eq + 1);
       const dataset::Dataset other = dataset::ReadDataset(path);
       if (other.info.patch_name != m.patch_name()) throw InputError(path + ": dataset is from patch '" + other.info.patch_name + "'");
-      const auto osp = DecodeWithProgress(m, spec, other, "decoding " + label, pcfg);
+      const auto osp = DecodeWithProgress(m, spec, other, "decoding " + label, pcfg, a->thermal_field);
       std::vector<std::int32_t> ids;
       for (std::size_t k = 0; k < other.size(); ++k) {
         if (other.indentation[k] >= 0 && (ids.empty() || ids.back() != other.indentation[k])) ids.push_back(other.indentation[k]);
@@ -347,6 +372,7 @@ void RegisterCalibrate(CLI::App& app) {
     bool creep = true;
     bool uncertainty_only = false;
     int sweeps = 3;
+    std::string thermal_field = "keep";
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -364,10 +390,14 @@ void RegisterCalibrate(CLI::App& app) {
                   "gratings' thermal ratios and the creep compensation")
       ->check(CLI::ExistingFile);
   cmd->add_flag("--creep,!--no-creep", a->creep, "With --field-data: also fit the creep compensation")->capture_default_str();
+  cmd->add_option("--thermal-field", a->thermal_field,
+                  "The decoder's baseline follows a thermal field across the patch (a cast whose cover sees gradients; "
+                  "docs/decoders.md): keep the model's choice, on or off")
+      ->check(CLI::IsMember({"keep", "on", "off"}))->capture_default_str();
   cmd->add_option("--sweeps", a->sweeps, "Coordinate sweeps of the gain fit")->check(CLI::Range(1, 20))->capture_default_str();
   cmd->add_flag("--uncertainty-only", a->uncertainty_only,
-                "Refit only the calibrated uncertainty: networks, gains, input range, thermal ratios, creep, sensitivity and "
-                "response maps stay as they are in --model");
+                "Refit only the calibrated uncertainty (and --thermal-field): networks, gains, input range, thermal ratios, "
+                "creep, sensitivity and response maps stay as they are in --model");
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
     const auto t0 = std::chrono::steady_clock::now();
@@ -390,6 +420,8 @@ void RegisterCalibrate(CLI::App& app) {
                   100.0 * u.position_within_2sd(), 100.0 * u.force_within_3sd(), 100.0 * u.position_within_3sd(),
                   u.position_floor_mm2());
     };
+    // The switch is set first, so everything fitted below sees the decoder's baseline as it will run.
+    if (a->thermal_field != "keep") m.mutable_preprocessing()->set_thermal_field(a->thermal_field == "on");
     if (a->uncertainty_only) {
       *m.mutable_uncertainty() = eval::FitUncertainty(m, md.spec, cal);
       decode::ValidateModel(m, a->out);

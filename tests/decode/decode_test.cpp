@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <numbers>
 #include <random>
 
 #include "ruffini/decode/baseline.h"
@@ -323,6 +324,147 @@ TEST(BaselineTest, TouchDuringCaptureRestartsItAndMissingPeaksStayNaN) {
   EXPECT_NEAR(s[0], 0.0f, 1e-3f);  // the baseline is the new level, not a mix
   EXPECT_TRUE(std::isnan(s[2]));
   EXPECT_TRUE(std::isnan(t.baseline_nm()[2]));
+}
+
+// The thermal field (BaselineConfig::thermal_field): the gratings' places from the forearm patch.
+BaselineConfig FieldConfig() {
+  BaselineConfig c;
+  c.thermal_field = true;
+  const double mm_per_deg = Spec().surface_radius_mm * std::numbers::pi / 180.0;
+  for (std::size_t i = 0; i < 16; ++i) {
+    c.grating_y_mm[i] = static_cast<float>(Spec().gratings[i].centre.y_mm);
+    c.grating_arc_mm[i] = static_cast<float>(Spec().gratings[i].centre.r_deg * mm_per_deg);
+  }
+  return c;
+}
+
+// A field across the patch at time t s: builds over 120 s to pm_per_mm along (warm elbow) and around.
+double FieldPm(const BaselineConfig& c, std::size_t i, double t, double along_pm_per_mm, double around_pm_per_mm) {
+  const double s = std::min(1.0, t / 120.0);
+  return s * (along_pm_per_mm * (75.0 - c.grating_y_mm[i]) + around_pm_per_mm * (60.0 - c.grating_arc_mm[i]));
+}
+
+TEST(ThermalField, AGradientUnderAPlacedPressIsFollowedAndThePressKept) {
+  // A held press on FBG 12 (its neighbours 13 and 14 move too) while a field builds over 2 min: 10 pm along
+  // the patch, 4 pm around (beyond the common mode, which the median takes). The decoder's gate is open and
+  // places the touch at FBG 12. With the thermal field the gratings away from the touch follow their own
+  // drift and the ones under it move with the plane through the others: the press stays, the field goes.
+  // Without it the field stays in the shifts (what latched the gate open in the field hours).
+  const std::array<float, 16> press = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -18.0f, -4.0f, 3.0f, 0, 0};
+  for (const bool on : {true, false}) {
+    BaselineConfig c = FieldConfig();
+    c.thermal_field = on;
+    BaselineTracker t(c);
+    const Wavelengths nominal = Nominal();
+    ShiftsPm s;
+    for (int k = 0; k < c.capture_frames; ++k) t.Update(nominal, s);
+    const float touch_y = c.grating_y_mm[11], touch_arc = c.grating_arc_mm[11];
+    for (int k = 0; k < 18000; ++k) {  // 3 min
+      const double time_s = k / c.sample_rate_hz;
+      Wavelengths wl = nominal;
+      for (std::size_t i = 0; i < 16; ++i) wl[i] += (press[i] + FieldPm(c, i, time_s, 0.1, 0.1)) * 1e-3;
+      ASSERT_TRUE(t.Measure(wl, s));
+      t.Advance(wl, s, BaselineTracker::Gate::kOpen, touch_y, touch_arc);
+    }
+    float worst_field = 0, worst_press = 0;
+    for (std::size_t i = 0; i < 16; ++i) {
+      ASSERT_TRUE(std::isfinite(s[i]));
+      if (press[i] != 0) {
+        worst_press = std::max(worst_press, std::abs(s[i] - press[i]));
+      } else {
+        worst_field = std::max(worst_field, std::abs(s[i]));
+      }
+    }
+    if (on) {
+      EXPECT_LT(worst_field, 0.3f);
+      EXPECT_LT(worst_press, 0.6f);  // the plane through the far gratings, carried under the touch
+      EXPECT_NE(t.field_slope_y(), 0.0f);
+    } else {
+      EXPECT_GT(std::max(worst_field, worst_press), 2.0f);
+    }
+  }
+}
+
+TEST(ThermalField, NeverCarriesOffAHeldPress) {
+  // No temperature change at all: a placed press held 5 min, then an unplaced light one (1.2 pm on one
+  // grating, the gate open) held 2 min, then the same light one with the gate closed for 5 s (below the gate:
+  // the robust fit leaves it out). Each must stay at its size.
+  BaselineConfig c = FieldConfig();
+  BaselineTracker t(c);
+  const Wavelengths nominal = Nominal();
+  ShiftsPm s;
+  for (int k = 0; k < c.capture_frames; ++k) t.Update(nominal, s);
+  Wavelengths wl = nominal;
+  wl[4] += -20e-3;
+  wl[3] += -6e-3;
+  wl[5] += 4e-3;
+  for (int k = 0; k < 30000; ++k) {
+    t.Measure(wl, s);
+    t.Advance(wl, s, BaselineTracker::Gate::kOpen, c.grating_y_mm[4], c.grating_arc_mm[4]);
+  }
+  EXPECT_NEAR(s[4], -20.0f, 0.05f);
+  EXPECT_NEAR(s[3], -6.0f, 0.05f);
+  EXPECT_NEAR(s[5], 4.0f, 0.05f);
+  for (std::size_t i : {0u, 9u, 15u}) EXPECT_NEAR(s[i], 0.0f, 0.05f);
+  wl = nominal;
+  wl[9] += 1.2e-3;
+  for (int k = 0; k < 12000; ++k) {
+    t.Measure(wl, s);
+    t.Advance(wl, s, BaselineTracker::Gate::kOpen);
+  }
+  EXPECT_NEAR(s[9], 1.2f, 0.05f);
+  for (int k = 0; k < 500; ++k) {
+    t.Measure(wl, s);
+    t.Advance(wl, s, BaselineTracker::Gate::kClosed);
+  }
+  // The slow filter (30 s) takes its usual share of 5 s: 1 - exp(-5/30) = 15 %; the field follower nothing.
+  EXPECT_NEAR(s[9], 1.2f * std::exp(-(500 - c.release_frames) / (c.drift_tau_s * c.sample_rate_hz)), 0.05f);
+}
+
+TEST(ThermalField, StepsAreBoundedAndBadPlacesOrMissingPeaksDoNothing) {
+  // A sudden 100 pm field (no temperature does that in 10 ms): each frame moves a baseline by at most
+  // field_max_rate_pm_s / rate. Gratings all in one row, or too few present, pin no plane: no step and no NaN.
+  BaselineConfig c = FieldConfig();
+  BaselineTracker t(c);
+  const Wavelengths nominal = Nominal();
+  ShiftsPm s;
+  for (int k = 0; k < c.capture_frames; ++k) t.Update(nominal, s);
+  Wavelengths wl = nominal;
+  for (std::size_t i = 0; i < 16; ++i) wl[i] += FieldPm(c, i, 1e9, 1.0, 1.0) * 1e-3;
+  const Wavelengths before = t.baseline_nm();
+  t.Measure(wl, s);
+  t.Advance(wl, s, BaselineTracker::Gate::kOpen);  // unplaced: the robust plane through the shifts
+  const double limit_pm = c.field_max_rate_pm_s / c.sample_rate_hz + 1e-9;
+  double largest = 0;
+  for (std::size_t i = 0; i < 16; ++i) {
+    // the common-mode follower moves every grating alike; what differs between gratings is the field's step
+    largest = std::max(largest, std::abs((t.baseline_nm()[i] - before[i]) - (t.baseline_nm()[0] - before[0])) * 1e3);
+  }
+  EXPECT_GT(largest, 0.5 * limit_pm);
+  EXPECT_LE(largest, 2 * limit_pm);
+
+  BaselineConfig row = FieldConfig();
+  for (std::size_t i = 0; i < 16; ++i) row.grating_y_mm[i] = 50.0f;  // one row around the limb... 
+  for (std::size_t i = 0; i < 16; ++i) row.grating_arc_mm[i] = 30.0f;  // ...at one place: nothing to fit
+  BaselineTracker r(row);
+  for (int k = 0; k < row.capture_frames; ++k) r.Update(nominal, s);
+  const Wavelengths r0 = r.baseline_nm();
+  r.Measure(wl, s);
+  r.Advance(wl, s, BaselineTracker::Gate::kClosed);
+  for (std::size_t i = 0; i < 16; ++i) {
+    ASSERT_TRUE(std::isfinite(r.baseline_nm()[i]));
+    EXPECT_EQ(r.field_slope_y(), 0.0f);
+  }
+  (void)r0;
+
+  BaselineTracker few(c);
+  for (int k = 0; k < c.capture_frames; ++k) few.Update(nominal, s);
+  Wavelengths sparse = wl;
+  for (std::size_t i = 0; i < 11; ++i) sparse[i] = std::numeric_limits<double>::quiet_NaN();  // 5 present < 6
+  few.Measure(sparse, s);
+  few.Advance(sparse, s, BaselineTracker::Gate::kClosed);
+  EXPECT_EQ(few.field_slope_y(), 0.0f);
+  for (std::size_t i = 11; i < 16; ++i) EXPECT_TRUE(std::isfinite(few.baseline_nm()[i]));
 }
 
 // ---------------------------------------------------------------------------------------------------

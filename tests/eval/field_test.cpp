@@ -363,6 +363,43 @@ TEST(ShippedModelField, HundredTwentySecondPresses) {
 
 // ruffini calibrate's thermal ratios recover the cast's per-grating temperature coefficients (the twin
 // draws them with a 3 % spread) from a field recording whose temperature moves, presses and all.
+TEST(ShippedModelField, AFieldAtFortyPicometresPerDegreeStaysStaleLessWithTheThermalField) {
+  // The embedded cast (40 pm/C) under a field building across the cover (3 C along, 2 C around, tau 10 min),
+  // the first 15 min of the field protocol (the field builds fastest there), decoded by its own model
+  // (forearm-embedded.rmodel: its thermal ratios, the thermal field on) and by the same model with the field
+  // off. Seeds 31-36 are the validation seeds the follower was built on (docs/experiments/thermal-field.md):
+  // off, every run goes stale within a minute or two and stays so (59,800 of 90,000 frames each); on, two of
+  // the six never go stale and the six together spend 0.58 of that. A regression guard on those figures, not a
+  // held-out score (that is in the report).
+  const twin::Scene scene = twin::LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/forearm-field-gradient.yaml");
+  const v1::DecoderModel embedded = decode::LoadModel(RUFFINI_SOURCE_DIR "/config/models/forearm-embedded.rmodel");
+  ASSERT_TRUE(embedded.preprocessing().thermal_field());
+  const twin::SkinTwin t(scene.Patch().spec, scene.effects, {scene.probe.radius_mm});
+  twin::FieldProtocol fp;
+  fp.duration_s = 900.0;
+  std::size_t stale_on = 0, stale_off = 0;
+  int never_stale_on = 0, never_stale_off = 0;
+  for (std::uint64_t seed = 31; seed <= 36; ++seed) {
+    const dataset::Dataset d = Collect(t, scene, "field", seed, fp.rate_hz,
+                                       [&](const twin::FrameSink& sink) { return twin::RunField(t, scene, fp, seed, sink); });
+    for (const bool field : {true, false}) {
+      decode::PipelineConfig cfg;
+      cfg.baseline = decode::BaselineFor(embedded, d.info.sample_rate_hz);
+      cfg.baseline.thermal_field = field;
+      const decode::Pipeline<float> pipe(embedded, scene.Patch().spec, cfg);
+      const StreamPredictions p = DecodeStream(pipe, d);
+      std::size_t stale = 0;
+      for (const std::uint8_t r : p.reason) stale += r == static_cast<std::uint8_t>(decode::Reason::kBaselineStale) ? 1 : 0;
+      (field ? stale_on : stale_off) += stale;
+      (field ? never_stale_on : never_stale_off) += stale == 0 ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(never_stale_off, 0);
+  EXPECT_GT(stale_off, 6u * 50000u);
+  EXPECT_GE(never_stale_on, 1);
+  EXPECT_LT(static_cast<double>(stale_on), 0.75 * static_cast<double>(stale_off));
+}
+
 TEST(Calibrate, ThermalRatiosRecoverTheCastsCoefficients) {
   const twin::SkinTwin t(FieldScene().Patch().spec, FieldScene().effects, {5.5});
   twin::FieldProtocol fp;

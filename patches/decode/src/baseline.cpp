@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Dense>
+
 namespace ruffini::decode {
 
 float MedianOfPresent(const ShiftsPm& s, int min_count) noexcept {
@@ -31,9 +33,12 @@ void BaselineTracker::Reset() noexcept {
   quiet_frames_ = 0;
   frozen_frames_ = 0;
   common_mode_pm_ = 0.0f;
+  field_slope_y_ = field_slope_arc_ = 0.0f;
+  moved_pm_.fill(0.0);
 }
 
 void BaselineTracker::Seed(const Wavelengths& b) noexcept {
+  moved_pm_.fill(0.0);
   baseline_nm_ = b;
   captured_nm_ = b;
   state_ = State::kTracking;
@@ -110,7 +115,143 @@ bool BaselineTracker::Measure(const Wavelengths& wl, ShiftsPm& shift) noexcept {
   return true;
 }
 
-void BaselineTracker::Advance(const Wavelengths& wl, const ShiftsPm& shift, Gate gate) noexcept {
+namespace {
+
+constexpr double kScaleMm = 50.0;  // the places are centred and scaled so the 3x3 normal equations stay well conditioned
+
+struct Places {
+  std::array<double, kGratings> y{}, x{};  // centred, scaled
+};
+
+Places PlacesOf(const BaselineConfig& c) noexcept {
+  double yc = 0, xc = 0;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    yc += c.grating_y_mm[i];
+    xc += c.grating_arc_mm[i];
+  }
+  yc /= kGratings;
+  xc /= kGratings;
+  Places p;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    p.y[i] = (c.grating_y_mm[i] - yc) / kScaleMm;
+    p.x[i] = (c.grating_arc_mm[i] - xc) / kScaleMm;
+  }
+  return p;
+}
+
+// The field's shape: a plane, a + b y + c x. Tried on validation data: a quadratic surface (plus y^2, x y,
+// x^2) fits a lamp's cosine around the limb better, but it also fits more of a touch, and it missed more
+// presses (docs/decoders.md "Thermal fields").
+using Basis = Eigen::Vector3d;
+
+Basis BasisAt(const Places& pl, std::size_t i) noexcept { return {1.0, pl.y[i], pl.x[i]}; }
+
+// Least squares plane through value[i] over the gratings in use, then again without the trim gratings
+// furthest from it. False when the gratings in use cannot pin a plane (fewer than min_count, all in one row).
+// Allocation-free.
+bool FitField(const Places& pl, std::array<bool, kGratings> use, const std::array<double, kGratings>& value, int trim,
+              int min_count, Basis& p) noexcept {
+  auto count = [&] {
+    int n = 0;
+    for (bool u : use) n += u ? 1 : 0;
+    return n;
+  };
+  auto fit = [&] {
+    Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
+    Basis b = Basis::Zero();
+    for (std::size_t i = 0; i < kGratings; ++i) {
+      if (!use[i]) continue;
+      const Basis r = BasisAt(pl, i);
+      a.noalias() += r * r.transpose();
+      b.noalias() += r * value[i];
+    }
+    const Eigen::LDLT<Eigen::Matrix3d> ldlt(a);
+    if (ldlt.info() != Eigen::Success || !(ldlt.rcond() > 1e-3)) return false;
+    p = ldlt.solve(b);
+    return p.allFinite();
+  };
+  const int n = count();
+  if (n < min_count || !fit()) return false;
+  trim = std::min(trim, n - min_count);
+  for (int k = 0; k < trim; ++k) {
+    std::size_t worst = kGratings;
+    double worst_r = -1;
+    for (std::size_t i = 0; i < kGratings; ++i) {
+      if (!use[i]) continue;
+      const double r = std::abs(value[i] - BasisAt(pl, i).dot(p));
+      if (r > worst_r) {
+        worst_r = r;
+        worst = i;
+      }
+    }
+    if (worst < kGratings) use[worst] = false;
+  }
+  return trim <= 0 || fit();
+}
+
+}  // namespace
+
+void BaselineTracker::FollowField(const ShiftsPm& s, float touch_y, float touch_arc) noexcept {
+  field_slope_y_ = field_slope_arc_ = 0.0f;
+  const Places pl = PlacesOf(config_);
+  const double rate = config_.sample_rate_hz;
+  const double max_step_pm = config_.field_max_rate_pm_s / rate;
+  const bool placed = std::isfinite(touch_y) && std::isfinite(touch_arc);
+  // Near the touch: within field_exclude_mm of its place, or moving by more than touch_off_pm (a touch the
+  // networks did not place, a second one).
+  std::array<bool, kGratings> far{};
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    far[i] = std::isfinite(s[i]) && std::isfinite(baseline_nm_[i]);
+    if (far[i] && placed) {
+      far[i] = std::hypot(config_.grating_y_mm[i] - touch_y, config_.grating_arc_mm[i] - touch_arc) > config_.field_exclude_mm;
+    }
+  }
+  Basis p;
+  if (state_ != State::kFrozen || !placed) {
+    // Untouched: the baseline follows the plane through the shifts with field_tau_s (the slow filter is too
+    // slow for a field building over minutes), robust to a touch the gate has not seen (trim).
+    std::array<double, kGratings> v{};
+    for (std::size_t i = 0; i < kGratings; ++i) v[i] = far[i] ? static_cast<double>(s[i]) : 0.0;
+    if (!FitField(pl, far, v, config_.field_trim, config_.field_min_gratings, p)) return;
+    field_slope_y_ = static_cast<float>(p[1] / kScaleMm);
+    field_slope_arc_ = static_cast<float>(p[2] / kScaleMm);
+    const double beta = std::min(1.0, 1.0 / (config_.field_tau_s * rate));
+    for (std::size_t i = 0; i < kGratings; ++i) {
+      if (!std::isfinite(baseline_nm_[i])) continue;
+      const double field_pm = BasisAt(pl, i).dot(p) - p[0];  // the mean stays with the common mode
+      baseline_nm_[i] += std::clamp(beta * field_pm, -max_step_pm, max_step_pm) * 1e-3;
+    }
+    return;
+  }
+  // Touched (frozen): a grating away from the touch and quiet follows its own wavelength with field_tau_s
+  // (no touch is on it to eat); what those gratings' baselines moved since the freeze began (beyond the
+  // common mode) is fitted by a plane, and the gratings near the touch move with that plane, never faster
+  // than field_max_rate_pm_s.
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (far[i] && std::abs(s[i]) > config_.touch_off_pm) far[i] = false;
+  }
+  const double beta = std::min(1.0, 1.0 / (config_.field_far_tau_s * rate));
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (!far[i]) continue;
+    const double step = std::clamp(beta * static_cast<double>(s[i]), -max_step_pm, max_step_pm);
+    baseline_nm_[i] += step * 1e-3;
+    moved_pm_[i] += step;
+  }
+  if (!FitField(pl, far, moved_pm_, config_.field_trim, config_.field_min_gratings, p)) return;
+  field_slope_y_ = static_cast<float>(p[1] / kScaleMm);
+  field_slope_arc_ = static_cast<float>(p[2] / kScaleMm);
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (far[i] || !std::isfinite(baseline_nm_[i])) continue;
+    const double target = BasisAt(pl, i).dot(p);
+    const double step = std::clamp(target - moved_pm_[i], -max_step_pm, max_step_pm);
+    baseline_nm_[i] += step * 1e-3;
+    moved_pm_[i] += step;
+  }
+}
+
+void BaselineTracker::Advance(const Wavelengths& wl, const ShiftsPm& shift, Gate gate, float touch_y_mm,
+                              float touch_arc_mm) noexcept {
+  const bool was_frozen = state_ == State::kFrozen;
   if (gate == Gate::kNone) {
     double max_abs = 0.0;
     for (float v : shift) {
@@ -144,6 +285,8 @@ void BaselineTracker::Advance(const Wavelengths& wl, const ShiftsPm& shift, Gate
       }
     }
   }
+  if (state_ == State::kFrozen && !was_frozen) moved_pm_.fill(0.0);
+  if (config_.thermal_field) FollowField(shift, touch_y_mm, touch_arc_mm);
 }
 
 }  // namespace ruffini::decode

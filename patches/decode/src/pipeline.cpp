@@ -34,6 +34,7 @@ BaselineConfig BaselineFor(const v1::DecoderModel& model, double sample_rate_hz)
   c.release_frames = std::max(1, static_cast<int>(std::lround(c.release_frames * scale)));
   c.sample_rate_hz = sample_rate_hz;
   c.common_mode = model.preprocessing().common_mode_removed();
+  c.thermal_field = model.preprocessing().thermal_field();
   if (model.preprocessing().thermal_ratio_size() == static_cast<int>(kGratings)) {
     for (std::size_t i = 0; i < kGratings; ++i) c.thermal_ratio[i] = model.preprocessing().thermal_ratio(static_cast<int>(i));
   }
@@ -102,6 +103,15 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
   for (std::size_t i = 0; i < kGratings; ++i) {
     grating_y_mm_[i] = spec.gratings[i].centre.y_mm;
     grating_a_mm_[i] = spec.gratings[i].centre.r_deg * mm_per_deg_;
+    config_.baseline.grating_y_mm[i] = static_cast<float>(grating_y_mm_[i]);
+    config_.baseline.grating_arc_mm[i] = static_cast<float>(grating_a_mm_[i]);
+  }
+  if (!(config_.baseline.field_tau_s > 0 && config_.baseline.field_tau_s < 1e6 && config_.baseline.field_trim >= 0 &&
+        config_.baseline.field_trim < static_cast<int>(kGratings) && config_.baseline.field_exclude_mm >= 0 &&
+        config_.baseline.field_min_gratings >= 3 && config_.baseline.field_min_gratings <= static_cast<int>(kGratings) &&
+        config_.baseline.field_max_rate_pm_s >= 0 && config_.baseline.field_max_rate_pm_s < 1e6)) {
+    throw InputError("pipeline: thermal field: field_tau_s must be > 0, field_trim 0..15, field_exclude_mm >= 0, "
+                     "field_min_gratings 3..16, field_max_rate_pm_s >= 0");
   }
   for (std::size_t i = 0; i < kGratings; ++i) {
     for (std::size_t j = 0; j < kGratings; ++j) {
@@ -388,7 +398,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   // Out of range: refused before it can move the baseline.
   if (!InRange(shift)) return over_range(Reason::kOutOfRange);
   d.over_range_ = false;
-  d.tracker_.Advance(wl, shift, gate);
+  d.tracker_.Advance(wl, shift, gate, d.place_y_mm_, d.place_a_mm_);
 
   if (!d.primed_) {
     decoder_.Reset(d.net_, &shift);  // as if this frame had been there for the whole window
@@ -398,6 +408,8 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   const DecodeOutput o = decoder_.Decode(shift, d.net_);
   out.missing = o.missing;
   if (!o.valid) return invalid(Reason::kNonFinite);
+  d.place_y_mm_ = o.located ? o.y_mm : BaselineTracker::kNoPlace;
+  d.place_a_mm_ = o.located ? static_cast<float>(o.r_deg * mm_per_deg_) : BaselineTracker::kNoPlace;
   // A baseline frozen too long is reported (a fault upstream), yet the stream goes on being decoded: the
   // gate keeps driving the baseline, so the fault clears itself once the gate lets go.
   if (d.tracker_.stale()) {

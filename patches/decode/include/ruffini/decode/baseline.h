@@ -31,6 +31,7 @@
 // Real-time safe: no allocation, no lock, no throw.
 #include <array>
 #include <cstdint>
+#include <limits>
 
 #include "ruffini/frame.h"
 
@@ -55,6 +56,29 @@ struct BaselineConfig {
   // Per-grating thermal sensitivity relative to the median grating: the common mode c comes off grating i
   // as thermal_ratio[i] x c (all 1: uniform). A cast property (model Preprocessing.thermal_ratio).
   std::array<float, kGratings> thermal_ratio = UnitRatios();
+  // Thermal field (thermal_field = true; needs the gratings' places below; a model property, Preprocessing.
+  // thermal_field). A cover is not at one temperature: a warm joint at one end, sunlight on one side. What the
+  // median leaves of such a field is smooth over where the gratings sit, and it builds over minutes, faster
+  // than the slow filter follows and right through a long press. So, after the common mode:
+  // - untouched, or touched where the networks do not place it: the baseline follows a plane (y mm along,
+  //   arc mm around) through the shifts with field_tau_s, robustly: the field_trim gratings furthest from a
+  //   first fit are left out (a touch the gate has not seen). Only the plane's slopes are followed; its mean
+  //   stays with the common mode;
+  // - touched and placed: the gratings more than field_exclude_mm from the place and moving by less than
+  //   touch_off_pm follow their own shift with field_far_tau_s (nothing presses them); a plane through what
+  //   those baselines moved since the freeze began carries the gratings under the touch along.
+  // Each baseline steps at most field_max_rate_pm_s (a field builds over minutes: a fit gone wrong cannot
+  // carry off a press faster than that). Fewer than field_min_gratings usable, or places that pin no plane
+  // (one row): no step. Measured: docs/experiments/thermal-field.md.
+  bool thermal_field = false;
+  double field_tau_s = 1.0;
+  double field_far_tau_s = 10.0;
+  int field_trim = 4;
+  double field_exclude_mm = 30.0;
+  int field_min_gratings = 6;
+  double field_max_rate_pm_s = 1.0;
+  std::array<float, kGratings> grating_y_mm{};    // the gratings' places on the patch (PatchSpec)
+  std::array<float, kGratings> grating_arc_mm{};  // r_deg x surface radius, mm
 
   static constexpr std::array<float, kGratings> UnitRatios() {
     std::array<float, kGratings> r{};
@@ -78,12 +102,19 @@ class BaselineTracker {
   // pipeline refuses out-of-range frames without letting them in): Measure() writes the shifts and the
   // common mode (false while capturing: then call Update()); Advance() moves the baseline and the freeze.
   bool Measure(const Wavelengths& wavelength_nm, ShiftsPm& shift_pm) noexcept;
-  void Advance(const Wavelengths& wavelength_nm, const ShiftsPm& shift_pm, Gate gate = Gate::kNone) noexcept;
+  // touch_y_mm / touch_arc_mm: where the decoder placed the touch on the previous frame (NaN: not placed);
+  // only the thermal field's fit uses it.
+  void Advance(const Wavelengths& wavelength_nm, const ShiftsPm& shift_pm, Gate gate = Gate::kNone,
+               float touch_y_mm = kNoPlace, float touch_arc_mm = kNoPlace) noexcept;
+  static constexpr float kNoPlace = std::numeric_limits<float>::quiet_NaN();
 
   [[nodiscard]] State state() const noexcept { return state_; }
   [[nodiscard]] const Wavelengths& baseline_nm() const noexcept { return baseline_nm_; }
   // The last frame's common-mode shift (pm, 0 when off or not estimable).
   [[nodiscard]] float common_mode_pm() const noexcept { return common_mode_pm_; }
+  // The last frame's fitted thermal field slopes (pm per mm along, around; 0 when off or not fitted).
+  [[nodiscard]] float field_slope_y() const noexcept { return field_slope_y_; }
+  [[nodiscard]] float field_slope_arc() const noexcept { return field_slope_arc_; }
   // How long the baseline has been frozen, s (0 while tracking).
   [[nodiscard]] double frozen_s() const noexcept { return static_cast<double>(frozen_frames_) / config_.sample_rate_hz; }
   [[nodiscard]] bool stale() const noexcept { return frozen_s() > config_.max_frozen_s; }
@@ -105,6 +136,11 @@ class BaselineTracker {
   int quiet_frames_ = 0;
   std::int64_t frozen_frames_ = 0;
   float common_mode_pm_ = 0.0f;
+  float field_slope_y_ = 0.0f;
+  float field_slope_arc_ = 0.0f;
+  std::array<double, kGratings> moved_pm_{};  // thermal field: each baseline's own move since the freeze began
+
+  void FollowField(const ShiftsPm& shift_pm, float touch_y_mm, float touch_arc_mm) noexcept;
 };
 
 // The median of the finite entries (NaN when fewer than min_count). No allocation.

@@ -184,6 +184,8 @@ class Pipeline {
     int pair_age_ = 1 << 30;       // frames since it (large: none)
     ShiftsPm smooth_{};            // the shifts, smoothed over faint_smooth_s
     bool smooth_primed_ = false;
+    float place_y_mm_ = BaselineTracker::kNoPlace;  // where the networks placed the last valid frame (the
+    float place_a_mm_ = BaselineTracker::kNoPlace;  // thermal field's fit leaves the gratings near it out)
   };
 
   // An accepted re-tare (retare.h): the baseline becomes baseline_nm (tracking, not frozen), and whatever
@@ -200,6 +202,7 @@ class Pipeline {
     d.gate_ = d.contact_ = d.over_range_ = false;
     d.recent_peak_pm_ = 0.0f;
     d.pair_age_ = 1 << 30;
+    d.place_y_mm_ = d.place_a_mm_ = BaselineTracker::kNoPlace;
   }
 
   // One interrogator frame. Real-time safe: no allocation, no lock, no throw.
