@@ -502,7 +502,8 @@ void RegisterFitResponse(CLI::App& app) {
   cmd->add_option("--area", a->area, "The map's grid: indented (the spec's indented area) | whole (the patch)")
       ->check(CLI::IsMember({"indented", "whole"}))->capture_default_str();
   cmd->add_option("--multiple-misfit", a->multiple_misfit,
-                  "Misfit above which a frame is not one touch (0..1; 0: the map is stored, nothing is flagged)")
+                  "Misfit above which a frame is not one touch (0..1; 0: the map is stored for the re-tare and checks nothing: the "
+                  "gratings' groups flag two touches, as without a map)")
       ->check(CLI::Range(0.0, 1.0))->required();
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <optional>
 #include <set>
+#include <string>
 #include <vector>
 
 #include "ruffini/decode/model_io.h"
@@ -24,13 +25,15 @@ constexpr double kRate = 100.0;
 constexpr double kLevel = 0.75;  // half the cobot forearm's 1.5 N threshold
 
 struct Shipped {
-  twin::Scene scene = twin::LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/cobot.yaml");
+  twin::Scene scene;
   std::size_t patch = 0;
   v1::DecoderModel model;
   std::unique_ptr<sim::MountedScene> mounts;
   std::unique_ptr<twin::SkinTwin> skin;
-  Shipped() {
-    while (scene.patches[patch].name != "forearm_a") ++patch;
+  explicit Shipped(const std::string& scene_path = RUFFINI_SOURCE_DIR "/config/scenes/cobot.yaml",
+                   const std::string& patch_name = "forearm_a")
+      : scene(twin::LoadScene(scene_path)) {
+    while (scene.patches[patch].name != patch_name) ++patch;
     model = LoadModel(scene.patches[patch].model_path);
     mounts = sim::LoadMounts(scene);
     skin = std::make_unique<twin::SkinTwin>(scene.patches[patch].spec, sim::EffectsFor(scene, mounts.get(), patch),
@@ -46,13 +49,13 @@ const Shipped& Get() {
 // optional error on one grating's peak (pm) standing for a baseline that kept a released press.
 class Stream {
  public:
-  explicit Stream(double max_frozen_s = 300.0, std::uint64_t seed = 7)
-      : s_(Get()), pipe_(s_.model, s_.scene.patches[s_.patch].spec, Config(max_frozen_s)), data_(pipe_),
+  explicit Stream(double max_frozen_s = 300.0, std::uint64_t seed = 7, const Shipped& shipped = Get())
+      : s_(shipped), pipe_(s_.model, s_.scene.patches[s_.patch].spec, Config(max_frozen_s, shipped)), data_(pipe_),
         sim_(*s_.skin, seed), retare_(&s_.model.response(), pipe_.config().baseline, RetareConfig{kLevel}) {}
 
-  static PipelineConfig Config(double max_frozen_s) {
+  static PipelineConfig Config(double max_frozen_s, const Shipped& shipped = Get()) {
     PipelineConfig c;
-    c.baseline = BaselineFor(Get().model, kRate);
+    c.baseline = BaselineFor(shipped.model, kRate);
     c.baseline.max_frozen_s = max_frozen_s;
     return c;
   }
@@ -201,6 +204,31 @@ TEST(Retare, AStaleBaselineRecoversAfterTheReleaseNotDuringThePress) {
   EXPECT_EQ(valid, 200);
   EXPECT_EQ(contact, 0);
   EXPECT_GT(st.Press(75.0, 72.5, 1.0), 0.8f) << "the press after the re-tare decodes as before";
+}
+
+// The shipped forearm models (the paper scene's and the field scene's) carry a response map with limit 0 (no
+// two-touch check: docs/decoders.md "Two touches"), so their decoders can judge a re-tare: the stuck patch
+// above, in each model's own scene, is refused under a press and recovers after the release.
+TEST(Retare, TheShippedForearmModelsJudgeAReTare) {
+  for (const char* scene : {"forearm.yaml", "forearm-field.yaml"}) {
+    SCOPED_TRACE(scene);
+    const Shipped shipped(std::string(RUFFINI_SOURCE_DIR "/config/scenes/") + scene, "forearm");
+    ASSERT_TRUE(shipped.model.has_response()) << shipped.scene.patches[shipped.patch].model_path;
+    EXPECT_EQ(shipped.model.response().multiple_misfit(), 0.0);
+    Stream st(3.0, 7, shipped);
+    st.Run(150);
+    EXPECT_GT(st.Press(75.0, 72.5, 1.0), 0.8f);
+    st.Run(100);
+    st.SetError(15, -0.8);
+    ASSERT_EQ(st.Run(600).reason, Reason::kBaselineStale);
+    st.Ramp(75.0, 72.5, 1.0);
+    EXPECT_EQ(st.Retare(75.0, 72.5, 1.0).outcome, RetareOutcome::kPressing);
+    st.Run(100);
+    const RetareResult accepted = st.Retare();
+    ASSERT_EQ(accepted.outcome, RetareOutcome::kAccepted) << accepted.force_n;
+    EXPECT_FALSE(st.data().baseline().stale());
+    EXPECT_FALSE(st.Run(100).in_contact);
+  }
 }
 
 // A press that starts inside the window (here at an edge, where 1.5 N moves no grating by the 3 pm capture

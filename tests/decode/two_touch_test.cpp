@@ -4,6 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "ruffini/decode/touches.h"
 #include "ruffini/error.h"
@@ -102,6 +106,94 @@ TEST(TwoTouches, WithoutAResponseMapTheGratingsGroupsFlagThem) {
   ASSERT_GT(j.located, 100);
   EXPECT_GE(j.flagged, j.located * 9 / 10);
   EXPECT_EQ(j.confident_wrong, 0);
+}
+
+// A map stored with limit 0 (the shipped forearm models': it is there for the re-tare, docs/safety.md) changes
+// no frame: a small recording through the twin (a light press, then two pairs of touches far apart, which the
+// gratings' groups flag) decodes field for field the same with it as without a map. The same map with its
+// limit (0.07) does change frames: the recording reaches the check.
+bool SameBits(float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+TEST(TwoTouches, AMapWithLimitZeroChangesNoFrame) {
+  const Shipped& s = Get();
+  const auto mounts = sim::LoadMounts(s.scene);
+  const twin::SkinTwin skin(s.scene.patches[s.patch].spec, sim::EffectsFor(s.scene, mounts.get(), s.patch),
+                            {s.scene.probe.radius_mm});
+  twin::InterrogatorSim interrogator(skin, 11);
+  constexpr double kRate = 100.0;
+  const std::vector<std::vector<ProbeAt>> presses = {
+      {{75.0, 72.5, 1.0}}, {{24.0, 42.5, 2.0}, {100.0, 102.5, 2.0}}, {{98.7, 33.5, 2.88}, {31.1, 62.3, 1.82}}};
+  std::vector<std::pair<Wavelengths, std::uint32_t>> recording;
+  auto record = [&](const std::vector<ProbeAt>& probes, double w) {
+    std::vector<twin::Contact> contacts;
+    for (const ProbeAt& p : probes) contacts.push_back(twin::Contact{{p.y_mm, p.r_deg}, w * p.force_n, s.scene.probe});
+    twin::Shifts sh{};
+    std::uint32_t flags = 0;
+    skin.StrainShiftsPm(contacts, sh, flags);
+    Wavelengths wl{};
+    interrogator.Read(static_cast<double>(recording.size()) / kRate, sh, wl, flags);
+    recording.emplace_back(wl, flags);
+  };
+  for (int k = 0; k < 150; ++k) record({}, 0.0);  // the baseline's capture
+  for (const auto& probes : presses) {
+    for (int k = 1; k <= 30; ++k) record(probes, k / 30.0);
+    for (int k = 0; k < 50; ++k) record(probes, 1.0);
+    for (int k = 29; k >= 0; --k) record(probes, k / 30.0);
+    for (int k = 0; k < 40; ++k) record({}, 0.0);
+  }
+
+  auto run = [&](const v1::DecoderModel& model) {
+    decode::PipelineConfig config;
+    config.baseline = decode::BaselineFor(model, kRate);
+    const decode::Pipeline<float> pipe(model, s.scene.patches[s.patch].spec, config);
+    decode::Pipeline<float>::Data data(pipe);
+    std::vector<decode::PipelineOutput> out;
+    for (const auto& [wl, flags] : recording) out.push_back(pipe.Process(wl, flags, data));
+    return std::pair(out, data.counters());
+  };
+  v1::DecoderModel bare = s.model, zero = s.model;
+  bare.clear_response();
+  zero.mutable_response()->set_multiple_misfit(0.0);
+  const auto [without, without_counters] = run(bare);
+  const auto [with, with_counters] = run(zero);
+  const auto [checked, checked_counters] = run(s.model);
+  ASSERT_GT(s.model.response().multiple_misfit(), 0.0);
+  ASSERT_GT(without_counters.located, 100u);
+  ASSERT_GT(without_counters.multiple, 50u) << "the gratings' groups flag no pair: the recording shows nothing";
+
+  ASSERT_EQ(with.size(), without.size());
+  for (std::size_t k = 0; k < with.size(); ++k) {
+    const decode::PipelineOutput &a = with[k], &b = without[k];
+    SCOPED_TRACE("frame " + std::to_string(k));
+    EXPECT_TRUE(SameBits(a.force_n, b.force_n)) << a.force_n << " vs " << b.force_n;
+    EXPECT_TRUE(SameBits(a.force_sd_n, b.force_sd_n));
+    EXPECT_TRUE(SameBits(a.y_mm, b.y_mm));
+    EXPECT_TRUE(SameBits(a.r_deg, b.r_deg));
+    EXPECT_TRUE(SameBits(a.cov_yy_mm2, b.cov_yy_mm2)) << a.cov_yy_mm2 << " vs " << b.cov_yy_mm2;
+    EXPECT_TRUE(SameBits(a.cov_yr_mm2, b.cov_yr_mm2));
+    EXPECT_TRUE(SameBits(a.cov_rr_mm2, b.cov_rr_mm2));
+    EXPECT_TRUE(SameBits(a.confidence, b.confidence));
+    EXPECT_TRUE(SameBits(a.common_mode_pm, b.common_mode_pm));
+    EXPECT_EQ(a.valid, b.valid);
+    EXPECT_EQ(a.in_contact, b.in_contact);
+    EXPECT_EQ(a.located, b.located);
+    EXPECT_EQ(a.over_range, b.over_range);
+    EXPECT_EQ(a.multiple, b.multiple);
+    EXPECT_EQ(a.touch_groups, b.touch_groups);
+    EXPECT_EQ(a.faint, b.faint);
+    EXPECT_EQ(a.reason, b.reason);
+    EXPECT_EQ(a.missing, b.missing);
+    if (::testing::Test::HasFailure()) break;  // the first frame that differs says enough
+  }
+  EXPECT_EQ(with_counters.multiple, without_counters.multiple);
+  EXPECT_EQ(with_counters.located, without_counters.located);
+  EXPECT_EQ(with_counters.onsets, without_counters.onsets);
+
+  std::size_t changed = 0;
+  for (std::size_t k = 0; k < checked.size(); ++k) {
+    if (checked[k].touch_groups != without[k].touch_groups || !SameBits(checked[k].cov_yy_mm2, without[k].cov_yy_mm2)) ++changed;
+  }
+  EXPECT_GT(changed, 0u) << "the map with its limit changes no frame either: the recording never reaches the check";
 }
 
 // The check alone, on a synthetic map: one Gaussian bump of sensitivity per grating.

@@ -257,7 +257,8 @@ int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& 
   for (std::size_t i = 0; i < kGratings; ++i) {
     if (std::isfinite(shift[i]) && std::abs(shift[i]) >= level) moved |= 1u << i;
   }
-  if (touches_ && out.located) {
+  // A map whose limit is 0 checks nothing (it is there for the re-tare): the gratings' groups below, as without one.
+  if (touches_ && touches_->limit() > 0 && out.located) {
     // The model's one-touch response: is this one touch? If not, the two-touch fit's places and total force.
     const bool refit = d.pair_age_ >= refit_frames_;
     TouchVerdict v = touches_->Check(shift, out.y_mm, out.r_deg, refit);
