@@ -331,6 +331,11 @@ TEST(AggregatorProcess, MetricsPassPromtool) {
   const std::string text = rt::Scrape(rt::ReadPorts(dir + "/ports")["metrics"]);
   ASSERT_NE(text.find("ruffini_aggregator_safety_state{state=\"fault\"} 1"), std::string::npos) << text;
   EXPECT_NE(text.find("ruffini_aggregator_safety_subscribers 1"), std::string::npos) << text;
+  // The seam counters (review 3, finding 7) and faint contact frames (issue 17) are exported, 0 before any contact.
+  for (const char* series : {"ruffini_aggregator_seam_pairs_total 0", "ruffini_aggregator_seam_mixtures_total 0",
+                             "ruffini_aggregator_seam_sums_total 0", "ruffini_aggregator_contacts_faint_total 0"}) {
+    EXPECT_NE(text.find(std::string("\n") + series + "\n"), std::string::npos) << series << "\n" << text;
+  }
   std::ofstream(dir + "/scrape.txt") << text;
   EXPECT_EQ(std::system(("promtool check metrics < " + dir + "/scrape.txt").c_str()), 0) << text;
 }
