@@ -272,6 +272,17 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
     }
   }
 
+  // Issue 17 end to end: the scenario's seam touch begins with frames whose every shift is within 1.25 pm of
+  // its baseline (measured: the first STOP frame's cause says "[faint: ...]"); the real decoders flag them, the
+  // flag crosses the link in PatchContact.faint and the aggregator counts it.
+  {
+    const std::string text = rt::Scrape(rt::ReadPorts(base + "/aggregator/ports")["metrics"]);
+    const std::string name = "\nruffini_aggregator_contacts_faint_total ";
+    const auto at = text.find(name);
+    ASSERT_NE(at, std::string::npos) << text;
+    EXPECT_GT(std::stod(text.substr(at + name.size())), 0.0) << "no contact frame arrived flagged faint";
+  }
+
   // A decoder dies (kill -9): every WatchSafety subscriber sees FAULT within 50 ms. A second subscriber joins
   // first.
   Controller second(address, /*resubscribe=*/true);
