@@ -90,6 +90,8 @@ void AggregatorServer::Impl::CopyStats() {
     stats.hellos_refused[r].store(c.hellos_refused[r], std::memory_order_relaxed);
   }
   stats.protocol_errors = c.protocol_errors;
+  stats.seam_sums = c.seam_sums;
+  stats.contacts_faint = c.contacts_faint;
   for (std::size_t r = 0; r < stats.retare_results.size() && r < c.retare_results.size(); ++r) {
     stats.retare_results[r].store(c.retare_results[r], std::memory_order_relaxed);
   }
@@ -109,6 +111,8 @@ void AggregatorServer::Impl::CopyStats() {
     stats.fusion_inputs = f->inputs;
     stats.fusion_merges = f->merges;
     stats.fusion_rejected = f->rejected_total();
+    stats.seam_pairs = f->seam_pairs;
+    stats.seam_mixtures = f->seam_mixtures;
   }
   const auto status_patches = core->policy().config().patches.size();
   const auto patches = core->Status(Now());

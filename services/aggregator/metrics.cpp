@@ -161,6 +161,18 @@ class StatsCollectable final : public prometheus::Collectable {
         u(s_.fusion_merges));
     one("ruffini_aggregator_fusion_rejected_total", "Patch contacts the fusion refused (bad input).",
         MetricType::Counter, u(s_.fusion_rejected));
+    one("ruffini_aggregator_seam_pairs_total",
+        "Pairs of patch contacts the fusion placed on their seam (docs/fusion.md, Seams).", MetricType::Counter,
+        u(s_.seam_pairs));
+    one("ruffini_aggregator_seam_mixtures_total",
+        "Of the seam pairs, those at two places along the seam made one covering contact.", MetricType::Counter,
+        u(s_.seam_mixtures));
+    one("ruffini_aggregator_seam_sums_total",
+        "Contact frames judged on the sum of both sides of their seam (safety.seam_sum; it was larger).",
+        MetricType::Counter, u(s_.seam_sums));
+    one("ruffini_aggregator_contacts_faint_total",
+        "Contact frames the decoder flagged faint (shifts a baseline error gives as well); judged as read.",
+        MetricType::Counter, u(s_.contacts_faint));
     {
       MetricFamily f{"ruffini_aggregator_auth_refusals_total",
                      "Callers refused for who they are: TLS handshakes refused (no or a bad client certificate), "

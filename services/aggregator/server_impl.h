@@ -192,6 +192,9 @@ struct Stats {
   // patch (copied from the core), a ResetStop from a non-operator.
   std::atomic<std::uint64_t> auth_wrong_role{0}, auth_hello_other_patch{0}, auth_reset_not_operator{0};
   std::atomic<std::uint64_t> fusion_updates{0}, fusion_inputs{0}, fusion_merges{0}, fusion_rejected{0};
+  // Seams (docs/fusion.md "Seams"): the fusion's pairs placed on their seam and, of them, the mixtures; the
+  // core's contacts judged on a seam sum. Contact messages flagged faint (the core's).
+  std::atomic<std::uint64_t> seam_pairs{0}, seam_mixtures{0}, seam_sums{0}, contacts_faint{0};
   std::atomic<int> safety_subscribers{0}, contact_subscribers{0};
   std::vector<std::string> patch_ids, patch_regions;
   std::unique_ptr<std::atomic<std::uint64_t>[]> contacts;   // contact onsets per patch

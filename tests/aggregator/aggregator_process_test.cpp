@@ -272,6 +272,17 @@ TEST(AggregatorProcess, StartsInFaultClearsByResetStopsOnAHardTouchNotOnALightOn
     }
   }
 
+  // Issue 17 end to end: the scenario's seam touch begins with frames whose every shift is within 1.25 pm of
+  // its baseline (measured: the first STOP frame's cause says "[faint: ...]"); the real decoders flag them, the
+  // flag crosses the link in PatchContact.faint and the aggregator counts it.
+  {
+    const std::string text = rt::Scrape(rt::ReadPorts(base + "/aggregator/ports")["metrics"]);
+    const std::string name = "\nruffini_aggregator_contacts_faint_total ";
+    const auto at = text.find(name);
+    ASSERT_NE(at, std::string::npos) << text;
+    EXPECT_GT(std::stod(text.substr(at + name.size())), 0.0) << "no contact frame arrived flagged faint";
+  }
+
   // A decoder dies (kill -9): every WatchSafety subscriber sees FAULT within 50 ms. A second subscriber joins
   // first.
   Controller second(address, /*resubscribe=*/true);
@@ -331,6 +342,11 @@ TEST(AggregatorProcess, MetricsPassPromtool) {
   const std::string text = rt::Scrape(rt::ReadPorts(dir + "/ports")["metrics"]);
   ASSERT_NE(text.find("ruffini_aggregator_safety_state{state=\"fault\"} 1"), std::string::npos) << text;
   EXPECT_NE(text.find("ruffini_aggregator_safety_subscribers 1"), std::string::npos) << text;
+  // The seam counters (review 3, finding 7) and faint contact frames (issue 17) are exported, 0 before any contact.
+  for (const char* series : {"ruffini_aggregator_seam_pairs_total 0", "ruffini_aggregator_seam_mixtures_total 0",
+                             "ruffini_aggregator_seam_sums_total 0", "ruffini_aggregator_contacts_faint_total 0"}) {
+    EXPECT_NE(text.find(std::string("\n") + series + "\n"), std::string::npos) << series << "\n" << text;
+  }
   std::ofstream(dir + "/scrape.txt") << text;
   EXPECT_EQ(std::system(("promtool check metrics < " + dir + "/scrape.txt").c_str()), 0) << text;
 }

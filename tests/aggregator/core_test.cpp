@@ -378,6 +378,69 @@ class CoreLoweringStopRule : public CoreStopRule {
 
 // With sd_k -1 a two-touch frame's force (the stronger fitted touch's lower bound) is never lowered again:
 // 1.6 N +- 0.3 N flagged multiple stops; the same reading of one touch is judged 1.3 N.
+// Issue 17: a frame flagged faint (every shift within a baseline error) is judged at its force as read, as an
+// unflagged one: 1.2 x the threshold STOPs, the cause carries that force and says "faint", the reset is refused
+// while it lasts; the flag reaches the body contact and the counter. Below the threshold it changes nothing
+// either (CLEAR, flagged in the set).
+TEST_F(CoreTest, AFaintContactStopsAtItsForceAndTheFlagReachesTheSetAndTheCause) {
+  const std::vector<int> streams = ClearAll();
+  const float threshold = setup.safety.regions[static_cast<std::size_t>(
+      core.policy().FindRegion(setup.safety.patches[2].region))].threshold_n;
+  auto faint = [&](float force_n, bool onset) {
+    v1::PatchMessage m = ContactMsg(force_n, tc);
+    auto* c = m.mutable_contact();
+    c->set_onset(onset);
+    c->set_located(true);
+    c->set_y_mm(60);
+    c->set_r_deg(30);
+    c->set_faint(true);
+    return m;
+  };
+  Send(streams[2], 2, faint(0.8f * threshold, true), tc);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR);
+  {
+    const v1::ContactSet set = core.Contacts(tc);
+    ASSERT_EQ(set.contacts_size(), 1);
+    EXPECT_TRUE(set.contacts(0).faint());
+    EXPECT_FLOAT_EQ(set.contacts(0).force_n(), 0.8f * threshold) << "the force is shown as read";
+  }
+  tc += 10 * kMs;
+  Send(streams[2], 2, faint(1.2f * threshold, false), tc);
+  const auto st = core.SafetyState();
+  ASSERT_EQ(st.state(), v1::SafetyState::STATE_STOP) << "a faint contact above its threshold stops";
+  EXPECT_EQ(st.cause().kind(), v1::SafetyCause::KIND_CONTACT);
+  EXPECT_FLOAT_EQ(st.cause().force_n(), 1.2f * threshold);
+  EXPECT_NE(st.cause().message().find("[faint:"), std::string::npos) << st.cause().message();
+  EXPECT_TRUE(core.Contacts(tc).contacts(0).faint());
+  EXPECT_EQ(core.counters().contacts_faint, 2u);
+  // Still pressed, still flagged: the STOP holds and a reset is refused.
+  for (int k = 0; k < 30; ++k) {
+    Beat(streams, 10, 2);
+    v1::PatchMessage hb;
+    hb.mutable_heartbeat()->set_healthy(true);
+    hb.mutable_heartbeat()->set_in_contact(true);
+    Send(streams[2], 2, hb, tc);
+    Send(streams[2], 2, faint(1.2f * threshold, false), tc);
+  }
+  const auto r = core.OnReset(ResetRequest(core.SafetyState().stop_epoch()), true, tc);
+  EXPECT_FALSE(r.accepted()) << r.message();
+  EXPECT_EQ(r.reason(), v1::RESET_REFUSAL_CAUSE_PRESENT) << r.message();
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
+  // An unflagged contact's cause does not say faint, and its body contact is not flagged.
+  v1::PatchMessage firm = ContactMsg(2.0f * threshold, tc);
+  firm.mutable_contact()->set_onset(true);
+  Send(streams[0], 0, firm, tc);
+  const v1::ContactSet set = core.Contacts(tc);
+  int firm_seen = 0;
+  for (const auto& b : set.contacts()) {
+    if (b.patch_ids(0) != setup.patches[0].id) continue;
+    ++firm_seen;
+    EXPECT_FALSE(b.faint());
+  }
+  EXPECT_EQ(firm_seen, 1) << set.DebugString();
+  EXPECT_EQ(core.counters().contacts_faint, 32u);
+}
+
 TEST_F(CoreLoweringStopRule, ATwoTouchFramesForceIsALowerBoundAndNotLowered) {
   const std::vector<int> streams = ClearAll();
   const std::int64_t t = tc;
@@ -472,6 +535,39 @@ TEST_F(CoreSeam, AProbeOnTheSeamIsJudgedOnBothSidesForces) {
   EXPECT_EQ(st.cause().patch_id(), "forearm_b");
   EXPECT_FLOAT_EQ(st.cause().force_n(), 1.8f);
   EXPECT_EQ(core.counters().seam_sums, 1u);
+  // Review 3, finding 7: the cause says its force is a sum, and of what.
+  EXPECT_NE(st.cause().message().find("force 1.8 N (seam sum of 'forearm_b' 0.9 N and 'forearm_a' 0.9 N)"),
+            std::string::npos)
+      << st.cause().message();
+}
+
+// A STOP on one side's own force names no seam sum, even with a live contact across the seam.
+TEST_F(CoreSeam, AStopOnItsOwnForceNamesNoSum) {
+  const std::vector<int> streams = ClearAll();
+  Send(streams[0], 0, Located(2.0f, 75, 10, tc), tc);
+  const auto st = core.SafetyState();
+  ASSERT_EQ(st.state(), v1::SafetyState::STATE_STOP);
+  EXPECT_FLOAT_EQ(st.cause().force_n(), 2.0f);
+  EXPECT_EQ(st.cause().message().find("seam sum"), std::string::npos) << st.cause().message();
+  EXPECT_EQ(core.counters().seam_sums, 0u);
+}
+
+// Issue 17: the fused contact of a probe on the seam is flagged faint only when both sides' frames are (a
+// force with one firm side does not rest on a baseline error alone).
+TEST_F(CoreSeam, AFusedContactIsFaintOnlyWhenEverySideIs) {
+  const std::vector<int> streams = ClearAll();
+  for (const bool other_faint : {false, true}) {
+    Beat(streams, 10);
+    v1::PatchMessage a = Located(0.5f, 75, 130, tc), b = Located(0.5f, 75, 15, tc);
+    a.mutable_contact()->set_faint(true);
+    b.mutable_contact()->set_faint(other_faint);
+    Send(streams[0], 0, a, tc);
+    Send(streams[1], 1, b, tc);
+    const v1::ContactSet set = core.Contacts(tc);
+    ASSERT_EQ(set.contacts_size(), 1) << "one probe on the seam: one body contact\n" << set.DebugString();
+    ASSERT_EQ(set.contacts(0).patch_ids_size(), 2);
+    EXPECT_EQ(set.contacts(0).faint(), other_faint) << set.DebugString();
+  }
 }
 
 TEST_F(CoreSeam, FarFromTheSeamApartAlongItOrReleasedTheSidesAreNotSummed) {

@@ -21,11 +21,12 @@ def contact_message():
     # 1700000000000100000, sender_run_id 0x0123456789abcdef, sender_steady_ns 5000000000,
     # aggregator_run_id 0xfedcba9876543210, contact{force 2.5, sd 0.125, located, y 75.5, r 42.25,
     # cov 4, 0.5, 9, confidence 0.75, onset, !released, common_mode -1.5, missing 0, calibrated,
-    # over_range, force_lower_bound 2.5, multiple}}
+    # over_range, force_lower_bound 2.5, multiple, faint}}
     out = s('forearm_a') + u64(7) + u64(1234) + i64(1700000000000000000) + i64(1700000000000100000)
     out += u64(0x0123456789abcdef) + i64(5000000000) + u64(0xfedcba9876543210) + u32(11)
     out += f32(2.5) + f32(0.125) + b(True) + f32(75.5) + f32(42.25) + f32(4.0) + f32(0.5) + f32(9.0)
     out += f32(0.75) + b(True) + b(False) + f32(-1.5) + u32(0) + b(True) + b(True) + f32(2.5) + b(True)
+    out += b(True)
     return out
 
 
@@ -51,7 +52,7 @@ def safety_state():
 
 
 # The values crc_test.cpp asserts (kContactCrc, kHeartbeatCrc, kStateCrc).
-EXPECTED = {'contact': 0xE2E57D68, 'heartbeat': 0x0A8F8F41, 'state': 0x2A93C49F}
+EXPECTED = {'contact': 0xE68ED30C, 'heartbeat': 0x0A8F8F41, 'state': 0x2A93C49F}
 
 if __name__ == '__main__':
     import sys

@@ -11,7 +11,7 @@ namespace ruffini::channel {
 namespace {
 
 // The same numbers as crc_oracle.py's EXPECTED.
-constexpr std::uint32_t kContactCrc = 0xE2E57D68;
+constexpr std::uint32_t kContactCrc = 0xE68ED30C;
 constexpr std::uint32_t kHeartbeatCrc = 0x0A8F8F41;
 constexpr std::uint32_t kStateCrc = 0x2A93C49F;
 
@@ -43,6 +43,7 @@ v1::PatchMessage ContactMessage() {
   c.set_over_range(true);
   c.set_force_lower_bound_n(2.5f);
   c.set_multiple(true);
+  c.set_faint(true);
   return m;
 }
 
@@ -148,6 +149,7 @@ TEST(SafetyCrc, EverySafetyFieldOfAContactIsCovered) {
       [](v1::PatchMessage& m) { m.mutable_contact()->set_uncertainty_calibrated(false); },
       [](v1::PatchMessage& m) { m.mutable_contact()->set_over_range(false); },
       [](v1::PatchMessage& m) { m.mutable_contact()->set_multiple(false); },
+      [](v1::PatchMessage& m) { m.mutable_contact()->set_faint(false); },
       [](v1::PatchMessage& m) { m.mutable_contact()->set_force_lower_bound_n(5.0f); },
       [](v1::PatchMessage& m) { m.mutable_heartbeat()->set_healthy(true); },  // another body
   };

@@ -315,6 +315,39 @@ TEST_F(MonitorTest, BaselineNeverCapturedIsAFault) {
   EXPECT_EQ(m.health().baseline, link::BaselineState::kCapturing);
 }
 
+// Issue 17: the pipeline's faint flag rides on the contact as information, located or not, the force as
+// decoded; an unflagged frame is not faint.
+TEST_F(MonitorTest, TheFaintFlagIsCarriedAndTheForceStands) {
+  link::Monitor m(pipe, Config(), At(0));
+  m.OnConnected(At(0), sink);
+  std::int64_t t = Feed(m, 0, 3);
+  sink.got.clear();
+  decode::PipelineOutput faint = ScriptedPipeline::Valid(0.8f, true, 40, 70);
+  faint.faint = true;
+  decode::PipelineOutput force_only = ScriptedPipeline::Valid(1.7f, true);
+  force_only.located = false;
+  force_only.y_mm = force_only.r_deg = std::numeric_limits<float>::quiet_NaN();
+  force_only.faint = true;
+  pipe.script = {faint, force_only, ScriptedPipeline::Valid(0.9f, true, 41, 71)};
+  Feed(m, t, 3, 4);
+  const auto contacts = sink.Of(Message::Kind::kContact);
+  ASSERT_EQ(contacts.size(), 3u);
+  EXPECT_TRUE(contacts[0].contact.faint);
+  EXPECT_FLOAT_EQ(contacts[0].contact.force_n, 0.8f);
+  EXPECT_TRUE(contacts[0].contact.located);
+  EXPECT_TRUE(contacts[1].contact.faint);
+  EXPECT_FALSE(contacts[1].contact.located);
+  EXPECT_FLOAT_EQ(contacts[1].contact.force_n, 1.7f);
+  EXPECT_FALSE(contacts[2].contact.faint);
+  v1::PatchMessage out;
+  link::ToProto(contacts[1], "forearm", 5, out);
+  ASSERT_TRUE(out.has_contact());
+  EXPECT_TRUE(out.contact().faint());
+  EXPECT_FLOAT_EQ(out.contact().force_n(), 1.7f);
+  link::ToProto(contacts[2], "forearm", 6, out);
+  EXPECT_FALSE(out.contact().faint());
+}
+
 TEST_F(MonitorTest, ProtoConversionKeepsEveryField) {
   link::Monitor m(pipe, Config(), At(0));
   m.OnConnected(At(0), sink);

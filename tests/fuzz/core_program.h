@@ -308,6 +308,8 @@ inline Tally Run(const std::uint8_t* data, std::size_t size) {
         }
         c->set_force_sd_n(a & 32 ? in.f32() : 0.02f);
         c->set_uncertainty_calibrated((a & 64) != 0);
+        // Flagged faint on half the frames, from bits already read (no byte of its own: programs read as before).
+        c->set_faint((((a >> 1) ^ (a >> 5)) & 1) != 0);
         send(k, m, (a & 128) == 0 || in.u8() != 0);
         break;
       }

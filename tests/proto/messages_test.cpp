@@ -235,6 +235,31 @@ TEST(PatchMessage, ContactRoundTripsWithItsUnits) {
   EXPECT_EQ(v1::PatchMessage().body_case(), v1::PatchMessage::BODY_NOT_SET);
 }
 
+// Issue 17: the faint flag round trips on its own (PatchContact 18, BodyContact 16), next to `multiple`, and a
+// contact from a sender that never sets it reads as not faint.
+TEST(PatchMessage, TheFaintFlagRoundTripsOnPatchAndBodyContacts) {
+  v1::PatchMessage m;
+  m.mutable_contact()->set_force_n(1.75f);
+  m.mutable_contact()->set_faint(true);
+  v1::PatchMessage back;
+  ASSERT_TRUE(back.ParseFromString(m.SerializeAsString()));
+  EXPECT_TRUE(back.contact().faint());
+  EXPECT_FALSE(back.contact().multiple());
+  EXPECT_FLOAT_EQ(back.contact().force_n(), 1.75f);
+  m.mutable_contact()->set_faint(false);
+  ASSERT_TRUE(back.ParseFromString(m.SerializeAsString()));
+  EXPECT_FALSE(back.contact().faint());
+  EXPECT_EQ(v1::PatchContact::kFaintFieldNumber, 18);
+  v1::BodyContact b;
+  b.set_force_n(1.75f);
+  b.set_faint(true);
+  v1::BodyContact body_back;
+  ASSERT_TRUE(body_back.ParseFromString(b.SerializeAsString()));
+  EXPECT_TRUE(body_back.faint());
+  EXPECT_FALSE(body_back.multiple());
+  EXPECT_EQ(v1::BodyContact::kFaintFieldNumber, 16);
+}
+
 // FrameRejectReason 1..8 are decode::Reason's values with the same numbers and names, so a decoder maps
 // one to the other with a cast, and its metric labels (ReasonName) match the wire names.
 TEST(FrameRejectReason, MirrorsDecodeReason) {

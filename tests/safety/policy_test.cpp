@@ -624,6 +624,67 @@ TEST(SafetyCause, ContactCauseCarriesTheEvidence) {
             " at t_ns " + std::to_string(frame_t));
 }
 
+// Issue 17: a frame the decoder flagged faint, and a force that is a seam sum (review 3 finding 7), are
+// information in the cause's text and nothing else: the same frames with and without the marks give the same
+// states, epochs, publications and reset outcomes at every step (a STOP at the force as read, never lowered,
+// held while the force stays above the release level).
+TEST(SafetyCause, FaintAndSeamSumMarksChangeNoJudgementAndAreNamed) {
+  World plain, marked;
+  for (World* w : {&plain, &marked}) {
+    w->Clear();
+    w->touching = {"forearm"};
+  }
+  const std::int32_t partner = marked.policy.FindPatch("upper_arm");
+  // Below the 160 N threshold, above it, hovering above the release level (144 N), then below it for the hold.
+  const float forces[] = {120.0f, 159.0f, 161.0f, 200.0f, 150.0f, 145.0f, 170.0f, 100.0f, 100.0f, 100.0f, 100.0f};
+  for (float f : forces) {
+    for (int k = 0; k < 12; ++k) {
+      for (World* w : {&plain, &marked}) {
+        w->Beat(10);
+        Contact c{.force_n = f};
+        if (w == &marked) {
+          c.faint = true;
+          c.seam_partner = partner;
+          c.seam_own_force_n = f / 2;
+          c.seam_partner_force_n = f / 2;
+        }
+        w->last = w->policy.OnContact(w->data, "forearm", c, w->t);
+        if (k == 11) w->ResetCurrent();
+      }
+      ASSERT_EQ(marked.state(), plain.state()) << f << " N";
+      ASSERT_EQ(marked.epoch(), plain.epoch()) << f << " N";
+      ASSERT_EQ(marked.data.state().seq, plain.data.state().seq) << f << " N";
+      ASSERT_EQ(marked.reset.accepted, plain.reset.accepted) << f << " N";
+      ASSERT_EQ(marked.reset.reason, plain.reset.reason) << f << " N";
+      ASSERT_FLOAT_EQ(marked.data.state().cause.force_n, plain.data.state().cause.force_n) << f << " N";
+    }
+    if (f == 200.0f) {
+      ASSERT_EQ(marked.state(), State::kStop);
+      EXPECT_EQ(marked.reset.reason, ResetRefusal::kCausePresent) << "a faint 200 N contact ended its cause";
+    }
+  }
+  EXPECT_EQ(marked.state(), State::kClear) << "the cause ends as the unmarked one does, after the hold below release";
+  // The first STOP's cause (161 N) says what it was.
+  World w;
+  w.Clear();
+  w.last = w.policy.OnContact(w.data, "forearm",
+                              {.force_n = 161.0f, .seam_partner = partner, .seam_own_force_n = 100.0f,
+                               .seam_partner_force_n = 61.0f, .faint = true},
+                              w.t);
+  const Cause& c = w.data.state().cause;
+  ASSERT_EQ(w.state(), State::kStop);
+  EXPECT_FLOAT_EQ(c.force_n, 161.0f);
+  const std::string text = Describe(w.policy, c);
+  EXPECT_NE(text.find("force 161 N (seam sum of 'forearm' 100 N and 'upper_arm' 61 N)"), std::string::npos) << text;
+  EXPECT_NE(text.find("[faint:"), std::string::npos) << text;
+  World one;
+  one.Clear();
+  one.Contact("forearm", 161.0f);
+  const std::string alone = Describe(one.policy, one.data.state().cause);
+  EXPECT_EQ(alone.find("seam sum"), std::string::npos) << alone;
+  EXPECT_EQ(alone.find("faint"), std::string::npos) << alone;
+}
+
 TEST(SafetyCause, NanDoubtIsNamed) {
   World w;
   w.Clear();

@@ -134,6 +134,8 @@ void Core::JudgeOnSeam(std::size_t pi, const v1::PatchContact& c, safety::Contac
   if (!setup_.safety.seam_sum.enabled || !fuser_ || !std::isfinite(c.force_n())) return;
   const fusion::FusionConfig& fc = fuser_->config();
   double best = sc.force_n;
+  std::size_t best_partner = 0;
+  float best_partner_n = 0.0f;
   for (const fusion::FusionConfig::SeamBand& sb : fc.seams) {
     if (sb.seam.a != pi && sb.seam.b != pi) continue;
     const bool mine_is_a = sb.seam.a == pi;
@@ -155,10 +157,19 @@ void Core::JudgeOnSeam(std::size_t pi, const v1::PatchContact& c, safety::Contac
     }
     if (!one) continue;
     // In double, clamped: two huge finite readings must not add up to +inf (a non-finite force is refused).
-    best = std::max(best, std::min(static_cast<double>(std::numeric_limits<float>::max()),
-                                   static_cast<double>(c.force_n()) + static_cast<double>(f_other)));
+    const double sum = std::min(static_cast<double>(std::numeric_limits<float>::max()),
+                                static_cast<double>(c.force_n()) + static_cast<double>(f_other));
+    if (sum > best) {
+      best = sum;
+      best_partner = pj;
+      best_partner_n = f_other;
+    }
   }
   if (best > sc.force_n) {
+    // The cause's text says the force is a sum, and of what (safety::Describe).
+    sc.seam_own_force_n = sc.force_n;
+    sc.seam_partner = static_cast<std::int32_t>(best_partner);
+    sc.seam_partner_force_n = best_partner_n;
     sc.force_n = static_cast<float>(best);
     ++counters_.seam_sums;
   }
@@ -502,6 +513,9 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       sc.released = c.released();
       sc.t_ns = m.t_ns();
       sc.doubt = doubt;
+      // Information only (the cause's text): the force above is judged as read, flagged or not.
+      sc.faint = c.faint();
+      if (c.faint()) ++counters_.contacts_faint;
       if (doubt != safety::Rejection::kNone) {
         // Not placed, not kept for WatchContacts as it stands: a doubt held as a contact at the patch (no
         // position), so the set still shows that something is there. Never a NaN on the wire.
@@ -539,6 +553,7 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       body.set_force_n(std::isfinite(c.force_n()) ? c.force_n() : -1.0f);
       body.set_force_sd_n(std::isfinite(c.force_sd_n()) ? c.force_sd_n() : 0.0f);
       body.set_multiple(c.located() && c.multiple());
+      body.set_faint(c.faint());
       body.add_patch_ids(std::string(id));
       body.set_body_region(pc.region);
       const std::int32_t region = policy_.FindRegion(pc.region);
@@ -841,11 +856,13 @@ v1::ContactSet Core::Contacts(std::int64_t now_ns) {
     b->set_located(f.located);
     std::uint64_t id = 0;
     std::int64_t onset = 0, t = 0;
+    bool faint = true;  // every contributor's frame flagged faint (a fused force with one firm side is not)
     for (std::size_t i = 0; i < links_.size(); ++i) {
       if (!f.HasPatch(i)) continue;
       b->add_patch_ids(setup_.patches[i].id);
       const v1::BodyContact& own = links_[i].contact;
       if (own.multiple()) b->set_multiple(true);
+      faint = faint && own.faint();
       if (id == 0 || own.contact_id() < id) id = own.contact_id();
       if (onset == 0 || own.onset_t_ns() < onset) onset = own.onset_t_ns();
       t = std::max(t, own.t_ns());
@@ -857,6 +874,7 @@ v1::ContactSet Core::Contacts(std::int64_t now_ns) {
     b->set_contact_id(id);
     b->set_onset_t_ns(onset);
     b->set_t_ns(t);
+    b->set_faint(faint && b->patch_ids_size() > 0);
   }
   // A patch in contact that no fused contact covers (a doubt, or a contact the fusion refused) is shown as the
   // Core holds it, never dropped: something touches that patch.

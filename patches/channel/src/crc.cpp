@@ -81,6 +81,7 @@ void Contact(Canonical& c, const v1::PatchContact& k) noexcept {
   c.Bool(k.over_range());
   c.F32(k.force_lower_bound_n());
   c.Bool(k.multiple());
+  c.Bool(k.faint());
 }
 
 void Beat(Canonical& c, const v1::Heartbeat& h) noexcept {

@@ -330,6 +330,7 @@ void Monitor::OnFrame(const FrameIn& f, Now now, MessageSink& sink) noexcept {
         }
         c.multiple = o.multiple;
       }
+      c.faint = o.faint;  // information only: the force above stands
       c.onset = o.in_contact && !in_contact_;
       c.released = !o.in_contact;
       c.common_mode_pm = Finite(o.common_mode_pm);

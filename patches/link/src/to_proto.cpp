@@ -30,6 +30,7 @@ void ToProto(const Message& m, const std::string& patch_id, std::uint64_t seq, v
       p->set_over_range(c.over_range);
       p->set_force_lower_bound_n(c.force_lower_bound_n);
       p->set_multiple(c.multiple);
+      p->set_faint(c.faint);
       break;
     }
     case Message::Kind::kHeartbeat: {

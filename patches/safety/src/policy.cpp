@@ -25,7 +25,8 @@ std::string Quoted(std::string_view s) { return "('" + std::string(s) + "')"; }
 bool Cause::operator==(const Cause& o) const noexcept {
   return kind == o.kind && patch == o.patch && region == o.region && SameForce(force_n, o.force_n) &&
          threshold_n == o.threshold_n && SameForce(judged_n, o.judged_n) && p_bc_m == o.p_bc_m && patch_fault == o.patch_fault && doubt == o.doubt &&
-         t_ns == o.t_ns;
+         t_ns == o.t_ns && seam_partner == o.seam_partner && SameForce(seam_own_force_n, o.seam_own_force_n) &&
+         SameForce(seam_partner_force_n, o.seam_partner_force_n) && faint == o.faint;
 }
 
 bool PatchState::operator==(const PatchState& o) const noexcept {
@@ -367,7 +368,11 @@ Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std
   Cause cause{.kind = CauseKind::kContact,
               .force_n = c.force_n,
               .p_bc_m = c.doubt == Rejection::kNone ? c.p_bc_m : std::nullopt,
-              .t_ns = c.t_ns != 0 && c.doubt != Rejection::kImplausibleTime ? c.t_ns : now_ns};
+              .t_ns = c.t_ns != 0 && c.doubt != Rejection::kImplausibleTime ? c.t_ns : now_ns,
+              .seam_partner = c.seam_partner,
+              .seam_own_force_n = c.seam_own_force_n,
+              .seam_partner_force_n = c.seam_partner_force_n,
+              .faint = c.faint};
   const std::int32_t i = FindPatch(patch_id);
   if (i == kNoPatch) return Refuse(d, Rejection::kUnknownPatch, cause, Severity::kStop);
   cause.patch = i;
@@ -745,6 +750,11 @@ std::string Describe(const Policy& p, const Cause& c) {
   if (c.patch != kNoPatch) s << " patch '" << p.patch_id(c.patch) << "'";
   if (c.kind == CauseKind::kContact) {
     s << " force " << c.force_n << " N";
+    if (c.seam_partner != kNoPatch) {
+      s << " (seam sum of '" << p.patch_id(c.patch) << "' " << c.seam_own_force_n << " N and '"
+        << p.patch_id(c.seam_partner) << "' " << c.seam_partner_force_n << " N)";
+    }
+    if (c.faint) s << " [faint: shifts within a baseline error, force judged as read]";
     if (p.config().stop_rule.sd_k != 0.0f && c.judged_n != c.force_n && c.doubt == Rejection::kNone) {
       s << " (judged " << c.judged_n << " N with its sd)";
     }

@@ -116,6 +116,7 @@ struct Counters {
   std::uint64_t protocol_errors = 0;
   std::uint64_t contacts = 0;                     // contact messages
   std::uint64_t contacts_placed = 0;              // placed in the base frame
+  std::uint64_t contacts_faint = 0;               // contact messages flagged faint (judged as read all the same)
   std::array<std::uint64_t, kJointRejectionCount> joint_states{};  // [0]: accepted
   std::array<std::uint64_t, kBadInputCount> bad_input{};          // by BadInput
   std::uint64_t takeovers = 0;                                    // silent streams replaced by a new hello

@@ -77,6 +77,7 @@ struct Contact {
   bool over_range = false;          // more load than the model knows: force_n is a lower bound
   float force_lower_bound_n = 0.0f;  // with over_range
   bool multiple = false;            // located, and more than one touch (the covariance holds them)
+  bool faint = false;               // shifts a baseline error gives as well (decode::PipelineOutput::faint)
 };
 
 struct Fault {

@@ -246,6 +246,13 @@ struct Contact {
   // The caller found the frame untrustworthy (kBadPosition, kBadCovariance, kImplausibleTime): refused as a
   // doubt (STOP), counted under that rejection; p_bc_m is then ignored.
   Rejection doubt = Rejection::kNone;
+  // Information for the cause's text only (never judged): force_n is the sum of this patch's reading
+  // (seam_own_force_n) and the newest one of patch seam_partner across their seam (seam_partner_force_n;
+  // aggregate::Core::JudgeOnSeam); kNoPatch: force_n is this patch's own. faint: the decoder flagged the frame
+  // faint (PatchContact.faint).
+  std::int32_t seam_partner = kNoPatch;
+  float seam_own_force_n = 0, seam_partner_force_n = 0;
+  bool faint = false;
 };
 
 struct ResetRequest {
@@ -268,6 +275,11 @@ struct Cause {
   PatchFaultCode patch_fault = PatchFaultCode::kUnspecified;  // kPatchFault
   Rejection doubt = Rejection::kNone;  // set when the cause is a refused input (a doubt, not a measurement)
   std::int64_t t_ns = 0;               // the evidence: the contact frame's t_ns, else now_ns when detected
+  // kContact, from Contact (information, in Describe's text): force_n was a seam sum of this patch's reading
+  // and seam_partner's; the frame was flagged faint.
+  std::int32_t seam_partner = kNoPatch;
+  float seam_own_force_n = 0, seam_partner_force_n = 0;
+  bool faint = false;
   // Field by field, a NaN force equal to a NaN force (a state compared with its copy is equal).
   bool operator==(const Cause& o) const noexcept;
 };
