@@ -307,6 +307,7 @@ void DecoderService::Impl::CopyStats() {
   st(stats.serial_gaps, h.serial_gaps);
   st(stats.frames_lost, h.frames_lost);
   st(stats.onsets, h.onsets);
+  st(stats.faint_frames, h.faint_frames);
   for (std::size_t i = 0; i < h.decode_rejected.size(); ++i) st(stats.decode_rejected[i], h.decode_rejected[i]);
   for (std::size_t i = 0; i < h.stream_rejected.size(); ++i) st(stats.stream_rejected[i], h.stream_rejected[i]);
   for (std::size_t i = 0; i < monitor->faults().size(); ++i) st(stats.faults[i], monitor->faults()[i]);

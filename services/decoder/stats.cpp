@@ -67,6 +67,9 @@ std::vector<MetricFamily> StatsCollectable::Collect() const {
   counter("ruffini_decoder_frames_dropped_total",
           "Frames dropped before decoding because the decode thread fell behind (ingest ring full).", s.ingest_dropped);
   counter("ruffini_decoder_contacts_total", "Contacts reported (onsets).", s.onsets);
+  counter("ruffini_decoder_frames_faint_total",
+          "Contact frames flagged faint: every shift below the faint level, which a baseline error gives as well.",
+          s.faint_frames);
   {
     auto& f = family("ruffini_decoder_faults_total", "Faults begun, by code.", MetricType::Counter);
     for (std::size_t i = 1; i < s.faults.size(); ++i) {

@@ -207,6 +207,10 @@ TEST_F(DecoderProcess, HelloThenHeartbeatsThenContactsWithTheDecodersAccuracy) {
   const std::string text = Scrape(dec.metrics_port);
   EXPECT_GT(Metric(text, "ruffini_decoder_frames_total{patch=\"forearm\"}"), 3000.0);
   EXPECT_GE(Metric(text, "ruffini_decoder_contacts_total{patch=\"forearm\"}"), 1.0);
+  // Every contact message flagged faint came from a frame the decoder counted (it sends fewer than it decodes).
+  std::size_t faint_sent = 0;
+  for (const auto& m : got) faint_sent += m.message.has_contact() && m.message.contact().faint() ? 1 : 0;
+  EXPECT_GE(Metric(text, "ruffini_decoder_frames_faint_total{patch=\"forearm\"}"), static_cast<double>(faint_sent));
   EXPECT_EQ(Metric(text, "ruffini_decoder_aggregator_connected{patch=\"forearm\"}"), 1.0);
   EXPECT_EQ(Metric(text, "ruffini_decoder_healthy{patch=\"forearm\"}"), 1.0);
   EXPECT_NE(text.find("ruffini_decoder_info{patch=\"forearm\",decoder=\"paper-float\""), std::string::npos);

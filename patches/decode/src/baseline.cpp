@@ -197,8 +197,7 @@ void BaselineTracker::FollowField(const ShiftsPm& s, float touch_y, float touch_
   const double rate = config_.sample_rate_hz;
   const double max_step_pm = config_.field_max_rate_pm_s / rate;
   const bool placed = std::isfinite(touch_y) && std::isfinite(touch_arc);
-  // Near the touch: within field_exclude_mm of its place, or moving by more than touch_off_pm (a touch the
-  // networks did not place, a second one).
+  // Far from the touch: more than field_exclude_mm from where the networks placed it (all, when unplaced).
   std::array<bool, kGratings> far{};
   for (std::size_t i = 0; i < kGratings; ++i) {
     far[i] = std::isfinite(s[i]) && std::isfinite(baseline_nm_[i]);
@@ -208,8 +207,9 @@ void BaselineTracker::FollowField(const ShiftsPm& s, float touch_y, float touch_
   }
   Basis p;
   if (state_ != State::kFrozen || !placed) {
-    // Untouched: the baseline follows the plane through the shifts with field_tau_s (the slow filter is too
-    // slow for a field building over minutes), robust to a touch the gate has not seen (trim).
+    // Untouched, or touched where the networks do not place it: the baseline follows the plane through the
+    // shifts with field_tau_s (the slow filter is too slow for a field building over minutes), robust to a
+    // touch the gate has not seen or not placed (trim).
     std::array<double, kGratings> v{};
     for (std::size_t i = 0; i < kGratings; ++i) v[i] = far[i] ? static_cast<double>(s[i]) : 0.0;
     if (!FitField(pl, far, v, config_.field_trim, config_.field_min_gratings, p)) return;
@@ -223,10 +223,10 @@ void BaselineTracker::FollowField(const ShiftsPm& s, float touch_y, float touch_
     }
     return;
   }
-  // Touched (frozen): a grating away from the touch and quiet follows its own wavelength with field_tau_s
-  // (no touch is on it to eat); what those gratings' baselines moved since the freeze began (beyond the
-  // common mode) is fitted by a plane, and the gratings near the touch move with that plane, never faster
-  // than field_max_rate_pm_s.
+  // Touched and placed (frozen): a grating away from the touch that moves by no more than touch_off_pm (no
+  // second touch on it) follows its own shift with field_far_tau_s; what those baselines moved since the
+  // freeze began (beyond the common mode) is fitted by a plane, and the gratings near the touch move with
+  // that plane, never faster than field_max_rate_pm_s.
   for (std::size_t i = 0; i < kGratings; ++i) {
     if (far[i] && std::abs(s[i]) > config_.touch_off_pm) far[i] = false;
   }

@@ -106,11 +106,12 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
     config_.baseline.grating_y_mm[i] = static_cast<float>(grating_y_mm_[i]);
     config_.baseline.grating_arc_mm[i] = static_cast<float>(grating_a_mm_[i]);
   }
-  if (!(config_.baseline.field_tau_s > 0 && config_.baseline.field_tau_s < 1e6 && config_.baseline.field_trim >= 0 &&
+  if (!(config_.baseline.field_tau_s > 0 && config_.baseline.field_tau_s < 1e6 && config_.baseline.field_far_tau_s > 0 &&
+        config_.baseline.field_far_tau_s < 1e6 && config_.baseline.field_trim >= 0 &&
         config_.baseline.field_trim < static_cast<int>(kGratings) && config_.baseline.field_exclude_mm >= 0 &&
         config_.baseline.field_min_gratings >= 3 && config_.baseline.field_min_gratings <= static_cast<int>(kGratings) &&
         config_.baseline.field_max_rate_pm_s >= 0 && config_.baseline.field_max_rate_pm_s < 1e6)) {
-    throw InputError("pipeline: thermal field: field_tau_s must be > 0, field_trim 0..15, field_exclude_mm >= 0, "
+    throw InputError("pipeline: thermal field: field_tau_s and field_far_tau_s must be > 0, field_trim 0..15, field_exclude_mm >= 0, "
                      "field_min_gratings 3..16, field_max_rate_pm_s >= 0");
   }
   for (std::size_t i = 0; i < kGratings; ++i) {

@@ -162,6 +162,7 @@ void Monitor::FillHealth() noexcept {
   const auto& c = pipeline_.counters();
   health_.valid_frames = c.valid;
   health_.onsets = c.onsets;
+  health_.faint_frames = c.faint;
   for (std::size_t i = 0; i < decode::kReasonCount; ++i) health_.decode_rejected[i] = c.invalid[i];
   health_.in_contact = in_contact_;
   switch (b.state()) {
