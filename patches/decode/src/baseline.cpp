@@ -165,6 +165,13 @@ bool FitField(const Places& pl, std::array<bool, kGratings> use, const std::arra
       a.noalias() += r * r.transpose();
       b.noalias() += r * value[i];
     }
+    // Both slopes need places spread along and around (sd of 5 mm each): LDLT alone would quietly give a
+    // row of gratings a plane with a made-up slope across it (its zero pivot is not a failure).
+    const double n_used = a(0, 0), min_var = (5.0 / kScaleMm) * (5.0 / kScaleMm);
+    if (!(n_used > 0)) return false;
+    const double var_y = a(1, 1) / n_used - (a(0, 1) / n_used) * (a(0, 1) / n_used);
+    const double var_x = a(2, 2) / n_used - (a(0, 2) / n_used) * (a(0, 2) / n_used);
+    if (!(var_y >= min_var && var_x >= min_var)) return false;
     const Eigen::LDLT<Eigen::Matrix3d> ldlt(a);
     if (ldlt.info() != Eigen::Success || !(ldlt.rcond() > 1e-3)) return false;
     p = ldlt.solve(b);
@@ -191,18 +198,18 @@ bool FitField(const Places& pl, std::array<bool, kGratings> use, const std::arra
 
 }  // namespace
 
-void BaselineTracker::FollowField(const ShiftsPm& s, float touch_y, float touch_arc) noexcept {
+void BaselineTracker::FollowField(const ShiftsPm& s, float touch_y_mm, float touch_arc_mm) noexcept {
   field_slope_y_ = field_slope_arc_ = 0.0f;
   const Places pl = PlacesOf(config_);
   const double rate = config_.sample_rate_hz;
   const double max_step_pm = config_.field_max_rate_pm_s / rate;
-  const bool placed = std::isfinite(touch_y) && std::isfinite(touch_arc);
+  const bool placed = std::isfinite(touch_y_mm) && std::isfinite(touch_arc_mm);
   // Far from the touch: more than field_exclude_mm from where the networks placed it (all, when unplaced).
   std::array<bool, kGratings> far{};
   for (std::size_t i = 0; i < kGratings; ++i) {
     far[i] = std::isfinite(s[i]) && std::isfinite(baseline_nm_[i]);
     if (far[i] && placed) {
-      far[i] = std::hypot(config_.grating_y_mm[i] - touch_y, config_.grating_arc_mm[i] - touch_arc) > config_.field_exclude_mm;
+      far[i] = std::hypot(config_.grating_y_mm[i] - touch_y_mm, config_.grating_arc_mm[i] - touch_arc_mm) > config_.field_exclude_mm;
     }
   }
   Basis p;
