@@ -13,6 +13,7 @@ void RegisterDemoCommand(CLI::App& app);
 void RegisterResetCommand(CLI::App& app);
 void RegisterSoakCommand(CLI::App& app);
 void RegisterCoverageCommands(CLI::App& app);
+void RegisterFieldHoursCommand(CLI::App& app);  // field-hours
 void RegisterProbeCommand(CLI::App& app);      // grating-probe  // sensitivity, check-scene
 
 }  // namespace ruffini::cli

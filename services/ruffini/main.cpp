@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   ruffini::cli::RegisterSoakCommand(app);
   ruffini::cli::RegisterCoverageCommands(app);
   ruffini::cli::RegisterProbeCommand(app);
+  ruffini::cli::RegisterFieldHoursCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::RuntimeError& e) {

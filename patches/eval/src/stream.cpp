@@ -44,6 +44,7 @@ StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const da
   out.in_contact.resize(n);
   out.reason.resize(n);
   out.baseline_frozen.resize(n);
+  out.over_range.resize(n);
   decode::Pipeline<float>::Data data(pipeline);
   for (std::size_t k = 0; k < n; ++k) {
     const decode::PipelineOutput o = pipeline.Process(d.wavelength_nm[k], d.flags[k], data);
@@ -60,6 +61,7 @@ StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const da
     out.located[k] = o.located;
     out.in_contact[k] = o.in_contact;
     out.reason[k] = static_cast<std::uint8_t>(o.reason);
+    out.over_range[k] = o.over_range;
     out.baseline_frozen[k] = data.baseline().state() == decode::BaselineTracker::State::kFrozen;
     if (progress && (k % 65536 == 0 || k + 1 == n)) progress(k + 1, n);
   }
@@ -84,6 +86,7 @@ void WriteStreamPredictions(const std::string& path, const StreamPredictions& p,
       {"in_contact", Column::Type::kU8, n, 1, p.in_contact.data()},
       {"reason", Column::Type::kU8, n, 1, p.reason.data()},
       {"baseline_frozen", Column::Type::kU8, n, 1, p.baseline_frozen.data()},
+      {"over_range", Column::Type::kU8, n, 1, p.over_range.data()},
   };
   std::string reasons;
   for (std::size_t r = 0; r < decode::kReasonCount; ++r) {

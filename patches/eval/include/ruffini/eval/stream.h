@@ -25,6 +25,7 @@ struct StreamPredictions {
   std::vector<float> force_n, force_sd_n, y_mm, r_deg, confidence, common_mode_pm;
   std::vector<float> pos_cov_mm2;  // n x 3: yy, yr, rr (mm^2 on the surface)
   std::vector<std::uint8_t> valid, located, in_contact, reason, baseline_frozen;
+  std::vector<std::uint8_t> over_range;  // reported as a contact of at least force_n (valid is 0)
   decode::PipelineCounters counters;
   [[nodiscard]] std::size_t size() const { return force_n.size(); }
 };
