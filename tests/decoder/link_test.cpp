@@ -258,6 +258,25 @@ TEST_F(MonitorTest, ContactsCarryOnsetAndReleaseAndNeverNaN) {
   EXPECT_EQ(c.cov_yy_mm2, 0.0f);
 }
 
+// The frame that closes the gate reads below the gate's off level, often a little below 0 (noise about an
+// unloaded patch, down to -0.1 N on a field cover): it is sent as a release of 0 N, never as a negative force the
+// aggregator would take for a broken decoder (a STOP). A contact frame's force is sent as read.
+TEST_F(MonitorTest, AReleaseIsSentClampedAtZero) {
+  link::Monitor m(pipe, Config(), At(0));
+  m.OnConnected(At(0), sink);
+  std::int64_t t = Feed(m, 0, 3);
+  sink.got.clear();
+  pipe.script = {ScriptedPipeline::Valid(0.3f, true, 40, 70), ScriptedPipeline::Valid(-0.08f, false),
+                 ScriptedPipeline::Valid(0.2f, true, 40, 70), ScriptedPipeline::Valid(0.01f, false)};
+  Feed(m, t, 4, 4);
+  const auto contacts = sink.Of(Message::Kind::kContact);
+  ASSERT_EQ(contacts.size(), 4u);
+  EXPECT_FLOAT_EQ(contacts[0].contact.force_n, 0.3f);
+  EXPECT_TRUE(contacts[1].contact.released);
+  EXPECT_EQ(contacts[1].contact.force_n, 0.0f);
+  EXPECT_FLOAT_EQ(contacts[3].contact.force_n, 0.01f);
+}
+
 TEST_F(MonitorTest, SerialGapsAreCounted) {
   link::Monitor m(pipe, Config(), At(0));
   m.OnConnected(At(0), sink);

@@ -158,7 +158,9 @@ StopScore ScoreStops(const dataset::Dataset& d, const StreamPredictions& p, cons
       reject_run = 0;
       if (p.in_contact[k] != 0 || monitor_in_contact) {
         if (p.in_contact[k] != 0) reported[k] = p.force_n[k];
-        judge(k, p.force_n[k], p.force_sd_n[k], false, p.in_contact[k] == 0, p.located[k] != 0);
+        // A release is sent clamped at 0 (link::Monitor::OnFrame).
+        const float sent = p.in_contact[k] != 0 ? p.force_n[k] : std::max(0.0f, p.force_n[k]);
+        judge(k, sent, p.force_sd_n[k], false, p.in_contact[k] == 0, p.located[k] != 0);
         monitor_in_contact = p.in_contact[k] != 0;
         message = true;
       }

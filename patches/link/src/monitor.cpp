@@ -312,7 +312,12 @@ void Monitor::OnFrame(const FrameIn& f, Now now, MessageSink& sink) noexcept {
       Stamp(m, now);
       Contact& c = m.contact;
       c = Contact{};
-      c.force_n = Finite(o.force_n);
+      // The frame that ends a contact carries the reading that closed the gate (below its 40 mN off level),
+      // which is noise about 0 and reads down to -0.1 N at rest on a field cover. Sent as read, it crossed the
+      // aggregator's negative-force doubt (-0.05 N: "decoders clamp at 0, further below is a broken decoder")
+      // and fired a STOP on a release about 2 times an hour (ruffini field-hours, docs/experiments/field-hours.md).
+      // A release is sent clamped at 0, as the contract says; an open gate never reads below its off level.
+      c.force_n = o.in_contact ? Finite(o.force_n) : std::max(0.0f, Finite(o.force_n));
       c.uncertainty = pipeline_.calibrated_uncertainty();
       c.force_sd_n = c.uncertainty ? Finite(o.force_sd_n) : 0.0f;
       // A covariance that is not finite would be sent as 0 (a perfectly confident place): such a frame is sent

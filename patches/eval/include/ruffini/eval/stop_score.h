@@ -5,8 +5,8 @@
 // nothing about stops).
 //
 // The decoder service and the safety policy are replayed on the decoded frames, for one patch:
-// - the decoder service (link::Monitor): a valid frame in contact, or the frame that ends a contact, is a
-//   contact message; an over-range frame is a contact of at least its force; a run of rejected frames
+// - the decoder service (link::Monitor): a valid frame in contact, or the frame that ends a contact (its force
+//   clamped at 0), is a contact message; an over-range frame is a contact of at least its force; a run of rejected frames
 //   (max(3, 20 ms of frames)) or a stale baseline is a FAULT while it lasts; the start-up capture is neither.
 // - the policy (safety::Policy::OnContact): a contact cause starts when the judged force is above the
 //   threshold (strictly; JudgedForce's sd_k rule), below -negative_tolerance, not finite, or located beyond
