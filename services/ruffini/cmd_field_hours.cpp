@@ -77,6 +77,7 @@ struct Hour {
   std::uint64_t seed = 0;
   std::string model;  // label
   eval::StopScore score;
+  eval::OperatorRetare retare;  // the operator's requests (when --retare)
 };
 
 // Pooled over hours.
@@ -125,6 +126,9 @@ void RegisterFieldHours(CLI::App& app) {
     double duration_s = 3600.0, rate_hz = 100.0;
     eval::StopRuleModel rule;
     std::string thermal_field = "model";
+    bool retare = false;
+    double retare_every_s = 10.0;
+    double retare_level_n = decode::RetareConfig{}.min_force_n;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -144,6 +148,15 @@ void RegisterFieldHours(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--thermal-field", a->thermal_field, "The thermal-field follower: model (as the file says) | on | off")
       ->check(CLI::IsMember({"model", "on", "off"}))
+      ->capture_default_str();
+  cmd->add_flag("--retare", a->retare,
+                "The operator re-tares a stale patch (RetarePatch, judged against the model's response map) when it "
+                "goes stale and every --retare-every-s while it stays so (docs/experiments/retare.md)");
+  cmd->add_option("--retare-every-s", a->retare_every_s, "With --retare: seconds between requests")
+      ->check(CLI::Range(0.5, 3600.0))
+      ->capture_default_str();
+  cmd->add_option("--retare-level-n", a->retare_level_n, "With --retare: a touch explaining this force refuses it")
+      ->check(CLI::Range(0.05, 10.0))
       ->capture_default_str();
   cmd->add_option("--out", a->out, "Report directory (report.md, hours.csv, episodes.csv, spurious.svg)")->capture_default_str();
   cmd->callback([a]() {
@@ -177,8 +190,12 @@ void RegisterFieldHours(CLI::App& app) {
           cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
           if (a->thermal_field != "model") cfg.baseline.thermal_field = a->thermal_field == "on";
           const decode::Pipeline<float> pipe(m, patch.spec, cfg);
-          const eval::StreamPredictions p = eval::DecodeStream(pipe, d);
-          hours.push_back({scene_name, seed, label, eval::ScoreStops(d, p, patch.spec, a->rule)});
+          eval::OperatorRetare op;
+          op.map = m.has_response() ? &m.response() : nullptr;
+          op.config.min_force_n = a->retare_level_n;
+          op.every_s = a->retare_every_s;
+          const eval::StreamPredictions p = a->retare ? eval::DecodeStream(pipe, d, op) : eval::DecodeStream(pipe, d);
+          hours.push_back({scene_name, seed, label, eval::ScoreStops(d, p, patch.spec, a->rule), op});
         }
         bar.Update(++done);
       }
@@ -196,6 +213,7 @@ void RegisterFieldHours(CLI::App& app) {
       << rule.threshold_n;
     if (rule.sd_k != 0) r << " --sd-k " << rule.sd_k;
     if (a->thermal_field != "model") r << " --thermal-field " << a->thermal_field;
+    if (a->retare) r << " --retare --retare-every-s " << a->retare_every_s << " --retare-level-n " << a->retare_level_n;
     r << " --out " << a->out << "`\n\n"
       << "Each run is `ruffini simulate --protocol field` (press, hold up to 120 s, release, rest; log-uniform peaks "
          "0.1-2.5 N; the same seed gives the same run), decoded by `decode::Pipeline` as the decoder service does, "
@@ -244,6 +262,29 @@ void RegisterFieldHours(CLI::App& app) {
         << p.n_hours << " | " << F("%.2f", p.fault_no_cause_s / 60.0 / std::max(1e-9, p.hours)) << " | "
         << Pct(static_cast<double>(p.false_contacts), static_cast<double>(p.quiet)) << " ("
         << F("%.1f", 100 * p.false_contact_min) << "-" << F("%.1f", 100 * p.false_contact_max) << " %) |\n";
+    }
+    if (a->retare) {
+      r << "\nThe operator re-tares a stale patch (`--retare`): asked when the patch goes `baseline_stale` and every "
+        << F("%.0f", a->retare_every_s) << " s while it stays so, judged against the model's response map (a touch of "
+        << F("%.2f", a->retare_level_n) << " N or more refuses it).\n\n"
+        << "| scene | model | re-tares asked | accepted | refused: something presses (of them while nothing did) / other | accepted while a press "
+           "was on (largest true force in the window) |\n| --- | --- | --- | --- | --- | --- |\n";
+      for (const auto& key : order) {
+        int asked = 0, acc = 0, pressing = 0, nothing = 0, other = 0, acc_pressed = 0;
+        double acc_max = 0;
+        for (const Hour& h : hours) {
+          if (h.scene != key.first || h.model != key.second) continue;
+          asked += h.retare.requests;
+          acc += h.retare.accepted;
+          pressing += h.retare.refused_pressing;
+          nothing += h.retare.refused_pressing_nothing;
+          other += h.retare.refused_other;
+          acc_pressed += h.retare.accepted_while_pressed;
+          acc_max = std::max(acc_max, h.retare.accepted_max_true_n);
+        }
+        r << "| " << key.first << " | `" << key.second << "` | " << asked << " | " << acc << " | " << pressing << " (" << nothing << ") / "
+          << other << " | " << acc_pressed << " (" << F("%.2f", acc_max) << " N) |\n";
+      }
     }
     r << "\nTargets (issue 17): spurious STOPs <= 0.1 per hour; 0 hours stuck; due presses: none missed, p99 <= "
          "100 ms; false contact frames <= 1 %.\n\n";

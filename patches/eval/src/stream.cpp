@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <set>
 #include <sstream>
 
@@ -28,8 +29,10 @@ std::string F(const char* fmt, double v) {
 
 }  // namespace
 
-StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const dataset::Dataset& d,
-                               const ProgressFn& progress) {
+namespace {
+
+StreamPredictions Decode(const decode::Pipeline<float>& pipeline, const dataset::Dataset& d, OperatorRetare* op,
+                         const ProgressFn& progress) {
   StreamPredictions out;
   const std::size_t n = d.size();
   out.force_n.resize(n);
@@ -46,6 +49,10 @@ StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const da
   out.baseline_frozen.resize(n);
   out.over_range.resize(n);
   decode::Pipeline<float>::Data data(pipeline);
+  std::unique_ptr<decode::Retare> retare;
+  if (op != nullptr) retare = std::make_unique<decode::Retare>(op->map, pipeline.config().baseline, op->config);
+  const double dt = d.info.sample_rate_hz > 0 ? 1.0 / d.info.sample_rate_hz : 0.0;
+  double last_request_s = -1e300, window_max_true = 0;
   for (std::size_t k = 0; k < n; ++k) {
     const decode::PipelineOutput o = pipeline.Process(d.wavelength_nm[k], d.flags[k], data);
     out.force_n[k] = o.force_n;
@@ -63,10 +70,48 @@ StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const da
     out.reason[k] = static_cast<std::uint8_t>(o.reason);
     out.over_range[k] = o.over_range;
     out.baseline_frozen[k] = data.baseline().state() == decode::BaselineTracker::State::kFrozen;
+    if (retare) {
+      // As link::Monitor: the window takes this frame's output; an accepted baseline holds from the next frame.
+      const float truth = k < d.true_force_n.size() ? d.true_force_n[k] : 0.0f;
+      const double t = static_cast<double>(k) * dt;
+      if (retare->active()) {
+        if (std::isfinite(truth)) window_max_true = std::max(window_max_true, static_cast<double>(truth));
+        if (const auto res = retare->Feed(d.wavelength_nm[k], o, data.baseline())) {
+          if (res->outcome == decode::RetareOutcome::kAccepted) {
+            pipeline.Retare(retare->baseline_nm(), data);
+            ++op->accepted;
+            if (window_max_true > 0.02) ++op->accepted_while_pressed;
+            op->accepted_max_true_n = std::max(op->accepted_max_true_n, window_max_true);
+          } else if (res->outcome == decode::RetareOutcome::kPressing) {
+            ++op->refused_pressing;
+            if (!(window_max_true > 0.02)) ++op->refused_pressing_nothing;
+          } else {
+            ++op->refused_other;
+          }
+        }
+      } else if (o.reason == decode::Reason::kBaselineStale && t - last_request_s >= op->every_s) {
+        last_request_s = t;
+        ++op->requests;
+        retare->Start();
+        window_max_true = std::isfinite(truth) ? truth : 0.0;
+      }
+    }
     if (progress && (k % 65536 == 0 || k + 1 == n)) progress(k + 1, n);
   }
   out.counters = data.counters();
   return out;
+}
+
+}  // namespace
+
+StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const dataset::Dataset& d,
+                               const ProgressFn& progress) {
+  return Decode(pipeline, d, nullptr, progress);
+}
+
+StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const dataset::Dataset& d, OperatorRetare& op,
+                               const ProgressFn& progress) {
+  return Decode(pipeline, d, &op, progress);
 }
 
 void WriteStreamPredictions(const std::string& path, const StreamPredictions& p, const std::string& model,

@@ -14,6 +14,7 @@
 
 #include "ruffini/dataset/dataset.h"
 #include "ruffini/decode/pipeline.h"
+#include "ruffini/decode/retare.h"
 #include "ruffini/patch/spec.h"
 #include "ruffini/stats.h"
 #include "ruffini/v1/model.pb.h"
@@ -34,6 +35,23 @@ using ProgressFn = std::function<void(std::uint64_t, std::uint64_t)>;
 
 StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const dataset::Dataset& data,
                                const ProgressFn& progress = {});
+
+// The operator's re-tare (docs/experiments/retare.md): when the patch goes baseline_stale (its FAULT), the
+// operator asks for a re-tare (decode::Retare, judged against the model's response map; RetarePatch in the
+// service), and asks again every every_s while it stays stale. What happened to the requests:
+struct OperatorRetare {
+  const v1::ResponseMap* map = nullptr;  // the model's (nullptr: every request is refused, no_map)
+  decode::RetareConfig config{};
+  double every_s = 10.0;
+  // Filled by DecodeStream:
+  int requests = 0, accepted = 0, refused_pressing = 0, refused_other = 0;
+  int accepted_while_pressed = 0;     // an accepted window held a true press above 20 mN
+  int refused_pressing_nothing = 0;   // refused as pressing while no true press above 20 mN was on (the map's doing)
+  double accepted_max_true_n = 0;     // the largest true force an accepted window held
+};
+// As above, with that operator (data must carry the true force only for the accepted_* figures).
+StreamPredictions DecodeStream(const decode::Pipeline<float>& pipeline, const dataset::Dataset& data,
+                               OperatorRetare& op, const ProgressFn& progress = {});
 
 // /pred/force_n, force_sd_n, y_mm, r_deg, confidence, common_mode_pm (f32), pos_cov_mm2 (f32 n x 3),
 // located, valid, in_contact, reason, baseline_frozen (u8; reason codes named in the root attribute
