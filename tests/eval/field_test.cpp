@@ -425,3 +425,41 @@ TEST(Calibrate, ThermalRatiosRecoverTheCastsCoefficients) {
 
 }  // namespace
 }  // namespace ruffini::eval
+
+namespace ruffini::eval {
+namespace {
+
+// The operator's re-tare inside DecodeStream (what `ruffini field-hours --retare` runs): validation seed 805 of
+// the field scene, whose baseline goes stale at 1127.6 s under a 0.41 N press held at the wrist side, stays
+// stale to the end without an operator, and recovers once the press is gone and a re-tare is accepted. The
+// operator's requests are refused while the press is on (it is a real press), none is accepted under a press.
+TEST(OperatorRetare, RecoversAStaleBaselineAndRefusesWhileThePressIsOn) {
+  const twin::SkinTwin t(FieldScene().Patch().spec, FieldScene().effects, {5.5});
+  twin::FieldProtocol fp;
+  fp.duration_s = 1400.0;
+  const dataset::Dataset d = Collect(t, FieldScene(), "field", 805, fp.rate_hz,
+                                     [&](const twin::FrameSink& s) { return twin::RunField(t, FieldScene(), fp, 805, s); });
+  decode::PipelineConfig cfg;
+  cfg.baseline = decode::BaselineFor(FieldModel(), d.info.sample_rate_hz);
+  const decode::Pipeline<float> pipe(FieldModel(), FieldScene().Patch().spec, cfg);
+  auto stale_s = [&](const StreamPredictions& p) {
+    std::size_t n = 0;
+    for (const std::uint8_t r : p.reason) n += r == static_cast<std::uint8_t>(decode::Reason::kBaselineStale) ? 1 : 0;
+    return static_cast<double>(n) / d.info.sample_rate_hz;
+  };
+  const double alone = stale_s(DecodeStream(pipe, d));
+  OperatorRetare op;
+  ASSERT_TRUE(FieldModel().has_response());
+  op.map = &FieldModel().response();
+  const double with_operator = stale_s(DecodeStream(pipe, d, op));
+  EXPECT_GT(alone, 250.0);           // measured: stale from 1127.6 s to the end (272 s)
+  EXPECT_LT(with_operator, 120.0);   // measured: 91 s, ten requests refused while the press was on
+  EXPECT_GE(op.requests, 2);
+  EXPECT_GE(op.accepted, 1);
+  EXPECT_GE(op.refused_pressing, 1);
+  EXPECT_EQ(op.refused_pressing_nothing, 0);
+  EXPECT_EQ(op.accepted_while_pressed, 0);
+}
+
+}  // namespace
+}  // namespace ruffini::eval
