@@ -85,7 +85,7 @@ struct Pool {
   double hours = 0, fault_s = 0, fault_no_cause_s = 0;
   int n_hours = 0, stuck = 0, presses = 0, due = 0, grey = 0, light = 0, due_stopped = 0, fault_only = 0;
   int spurious = 0, rest = 0, light_fired = 0;
-  std::size_t quiet = 0, false_contacts = 0;
+  std::size_t quiet = 0, false_contacts = 0, pressed = 0, unseen = 0;
   double false_contact_min = 1e9, false_contact_max = 0;
   std::vector<double> delays;
   std::array<int, 5> by_kind{};  // spurious episodes by what started them (EpisodeKind)
@@ -111,6 +111,8 @@ struct Pool {
     }
     quiet += s.quiet_frames;
     false_contacts += s.false_contact_frames;
+    pressed += s.pressed_frames;
+    unseen += s.unseen_frames;
     const double fc = s.quiet_frames > 0 ? static_cast<double>(s.false_contact_frames) / static_cast<double>(s.quiet_frames) : 0;
     false_contact_min = std::min(false_contact_min, fc);
     false_contact_max = std::max(false_contact_max, fc);
@@ -127,6 +129,7 @@ void RegisterFieldHours(CLI::App& app) {
     eval::StopRuleModel rule;
     std::string thermal_field = "model";
     bool retare = false;
+    double gate_on_n = 0;  // 0: the model's
     double retare_every_s = 10.0;
     double retare_level_n = decode::RetareConfig{}.min_force_n;
   };
@@ -149,6 +152,10 @@ void RegisterFieldHours(CLI::App& app) {
   cmd->add_option("--thermal-field", a->thermal_field, "The thermal-field follower: model (as the file says) | on | off")
       ->check(CLI::IsMember({"model", "on", "off"}))
       ->capture_default_str();
+  cmd->add_option("--gate-on-n", a->gate_on_n,
+                  "Experiment: the force gate's on level for every model (off at 0.8 x on, as trained); 0: each model's")
+      ->check(CLI::Range(0.0, 2.0))
+      ->capture_default_str();
   cmd->add_flag("--retare", a->retare,
                 "The operator re-tares a stale patch (RetarePatch, judged against the model's response map) when it "
                 "goes stale and every --retare-every-s while it stays so (docs/experiments/retare.md)");
@@ -162,7 +169,13 @@ void RegisterFieldHours(CLI::App& app) {
   cmd->callback([a]() {
     const std::vector<std::uint64_t> seeds = ParseSeeds(a->seeds);
     std::vector<std::pair<std::string, v1::DecoderModel>> models;
-    for (const auto& m : a->models) models.emplace_back(std::filesystem::path(m).filename().string(), decode::LoadModel(m));
+    for (const auto& m : a->models) {
+      models.emplace_back(std::filesystem::path(m).filename().string(), decode::LoadModel(m));
+      if (a->gate_on_n > 0) {
+        models.back().second.mutable_gating()->set_on_n(static_cast<float>(a->gate_on_n));
+        models.back().second.mutable_gating()->set_off_n(static_cast<float>(0.8 * a->gate_on_n));
+      }
+    }
     std::filesystem::create_directories(a->out);
     std::vector<Hour> hours;
     ProgressBar bar("field hours", a->scenes.size() * seeds.size());
@@ -213,6 +226,7 @@ void RegisterFieldHours(CLI::App& app) {
       << rule.threshold_n;
     if (rule.sd_k != 0) r << " --sd-k " << rule.sd_k;
     if (a->thermal_field != "model") r << " --thermal-field " << a->thermal_field;
+    if (a->gate_on_n > 0) r << " --gate-on-n " << a->gate_on_n;
     if (a->retare) r << " --retare --retare-every-s " << a->retare_every_s << " --retare-level-n " << a->retare_level_n;
     r << " --out " << a->out << "`\n\n"
       << "Each run is `ruffini simulate --protocol field` (press, hold up to 120 s, release, rest; log-uniform peaks "
@@ -241,8 +255,8 @@ void RegisterFieldHours(CLI::App& app) {
       << "| scene | model | hours | spurious STOPs per hour | rest episodes / light presses that STOP | "
          "spurious episodes started by: force above / force below 0 / place beyond / over range / FAULT | "
          "due presses: missed / stopped by FAULT only | true crossing to STOP, ms: p50 / "
-         "p99 / max | hours stuck in FAULT | FAULT min per hour with no cause | false contact frames (range over hours) |\n"
-      << "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
+         "p99 / max | hours stuck in FAULT | FAULT min per hour with no cause | false contact frames (range over hours) | frames above 100 mN not in contact |\n"
+      << "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
     std::map<std::pair<std::string, std::string>, Pool> pools;
     std::vector<std::pair<std::string, std::string>> order;
     for (const Hour& h : hours) {
@@ -261,7 +275,8 @@ void RegisterFieldHours(CLI::App& app) {
         << " / " << F("%.0f", p.delays.empty() ? std::nan("") : p.delays.back()) << " | " << p.stuck << " of "
         << p.n_hours << " | " << F("%.2f", p.fault_no_cause_s / 60.0 / std::max(1e-9, p.hours)) << " | "
         << Pct(static_cast<double>(p.false_contacts), static_cast<double>(p.quiet)) << " ("
-        << F("%.1f", 100 * p.false_contact_min) << "-" << F("%.1f", 100 * p.false_contact_max) << " %) |\n";
+        << F("%.1f", 100 * p.false_contact_min) << "-" << F("%.1f", 100 * p.false_contact_max) << " %) | "
+        << Pct(static_cast<double>(p.unseen), static_cast<double>(p.pressed)) << " |\n";
     }
     if (a->retare) {
       r << "\nThe operator re-tares a stale patch (`--retare`): asked when the patch goes `baseline_stale` and every "

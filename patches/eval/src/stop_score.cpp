@@ -301,9 +301,14 @@ StopScore ScoreStops(const dataset::Dataset& d, const StreamPredictions& p, cons
     } else {
       run_no_cause = 0;
     }
+    const bool reported_contact = (p.valid[k] != 0 && p.in_contact[k] != 0) || p.over_range[k] != 0;
+    if (std::isfinite(truth) && truth > 0.1f) {
+      ++s.pressed_frames;
+      if (!reported_contact) ++s.unseen_frames;
+    }
     if (std::isfinite(truth) && truth < rule.quiet_n) {
       ++s.quiet_frames;
-      if ((p.valid[k] != 0 && p.in_contact[k] != 0) || p.over_range[k] != 0) ++s.false_contact_frames;
+      if (reported_contact) ++s.false_contact_frames;
     }
   }
   return s;

@@ -86,6 +86,7 @@ struct StopScore {
   // FAULT time, and the part of it while no press was above the threshold (no present cause).
   double fault_s = 0, fault_no_cause_s = 0, longest_fault_no_cause_s = 0;
   std::size_t quiet_frames = 0, false_contact_frames = 0;  // true force < quiet_n; of them reported in contact
+  std::size_t pressed_frames = 0, unseen_frames = 0;       // true force > 100 mN; of them not reported in contact
 
   [[nodiscard]] int CountEpisodes(EpisodeCause c) const;
   [[nodiscard]] int CountEpisodes(EpisodeCause c, EpisodeKind k) const;
