@@ -1,0 +1,28 @@
+#!/bin/sh
+# Issue 17's field-hours figures (docs/experiments/field-hours.md): every run of `ruffini field-hours`, validation
+# seeds 801-810 first (every choice), then the held-out seeds 901-910 (scored once). About 25 minutes on 2 cores.
+# Usage: docs/experiments/field-hours.sh [BUILD_DIR] [OUT_DIR]
+set -eu
+B=${1:-build/release}/bin/ruffini
+OUT=${2:-field-hours}
+M=config/models
+S=config/scenes
+mkdir -p "$OUT"
+# Validation: the shipped field and lab models, the stop rule as the scenes ship it and with sd_k -1, the gate.
+$B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
+  --scene $S/forearm-field-nodrift.yaml --seeds 801-810 --out "$OUT/val"
+$B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
+  --seeds 801-810 --sd-k -1 --out "$OUT/val-sd-1"
+for g in 0.05 0.1 0.15 0.2 0.3; do
+  $B field-hours --model $M/forearm-field.rmodel --scene $S/forearm-field.yaml --seeds 801-810 --gate-on-n $g \
+    --retare --out "$OUT/val-gate$g"
+done
+# Held out, once: as shipped, and with the operator's re-tare; the embedded cast (40 pm/C) with and without a field.
+$B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
+  --scene $S/forearm-field-nodrift.yaml --seeds 901-910 --out "$OUT/test"
+$B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
+  --scene $S/forearm-field-nodrift.yaml --seeds 901-910 --retare --out "$OUT/test-retare"
+$B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
+  --scene $S/forearm-field-embedded.yaml --seeds 901-910 --out "$OUT/test-embedded"
+$B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
+  --scene $S/forearm-field-embedded.yaml --seeds 901-910 --retare --out "$OUT/test-embedded-retare"
