@@ -6,7 +6,7 @@
 // the re-tares by outcome, those refused while something pressed, and those accepted while something
 // pressed (what a re-tare absorbed: its largest true force).
 //
-//   retare_eval --model M.rmodel [--level-n 0.75] [--every-s 10] [--threshold-n 1.5] DATA.h5...
+//   retare_eval --model M.rmodel [--level-n 0.75] [--every-s 10] [--threshold-n 1.5] [--dry-run] [--separate-field] DATA.h5...
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -23,6 +23,10 @@
 using namespace ruffini;
 
 namespace {
+
+// --separate-field: the judge separates a first-order temperature field from a touch (RetareConfig).
+bool g_separate_field = false;
+const patch::PatchSpec* g_spec = nullptr;
 
 struct Run {
   double hours = 0, stale_s = 0, stale_no_cause_s = 0, longest_stale_s = 0;
@@ -46,6 +50,7 @@ Run Decode(const v1::DecoderModel& m, const patch::PatchSpec& spec, const datase
   decode::RetareConfig rc;
   rc.min_force_n = level_n;
   rc.min_shift_pm = min_shift_pm;
+  if (g_separate_field) rc.SeparateField(*g_spec);
   decode::Retare retare(m.has_response() ? &m.response() : nullptr, cfg.baseline, rc);
   const double dt = 1.0 / d.info.sample_rate_hz;
   Run r;
@@ -124,6 +129,7 @@ Dry DryRun(const v1::DecoderModel& m, const patch::PatchSpec& spec, const datase
   decode::RetareConfig rc;
   rc.min_force_n = level_n;
   rc.min_shift_pm = min_shift_pm;
+  if (g_separate_field) rc.SeparateField(*g_spec);
   decode::Retare retare(m.has_response() ? &m.response() : nullptr, cfg.baseline, rc);
   const double dt = 1.0 / d.info.sample_rate_hz;
   Dry r;
@@ -192,14 +198,16 @@ int main(int argc, char** argv) {
     else if (a == "--threshold-n") threshold_n = std::stod(next());
     else if (a == "--min-shift-pm") min_shift_pm = std::stod(next());
     else if (a == "--dry-run") dry = true;
+    else if (a == "--separate-field") g_separate_field = true;
     else files.push_back(a);
   }
   if (model_path.empty() || files.empty()) {
-    std::fprintf(stderr, "usage: retare_eval --model M.rmodel [--level-n N] [--every-s S] [--threshold-n N] [--min-shift-pm P] [--dry-run] DATA.h5...\n");
+    std::fprintf(stderr, "usage: retare_eval --model M.rmodel [--level-n N] [--every-s S] [--threshold-n N] [--min-shift-pm P] [--dry-run] [--separate-field] DATA.h5...\n");
     return 2;
   }
   const v1::DecoderModel m = decode::LoadModel(model_path);
   const patch::PatchSpec spec = patch::LoadPatchSpec(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml");
+  g_spec = &spec;
   std::printf("model %s (response map: %s), level %.2f N, min shift %.2f pm, operator every %.0f s while stale, "
               "threshold %.2f N\n\n",
               model_path.c_str(), m.has_response() ? "yes" : "no", level_n, min_shift_pm, every_s, threshold_n);

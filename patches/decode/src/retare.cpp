@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
 
 #include "ruffini/decode/touches.h"
 #include "ruffini/error.h"
@@ -23,6 +27,40 @@ std::string_view RetareOutcomeName(RetareOutcome o) noexcept {
   return "unknown";
 }
 
+void RetareConfig::SeparateField(const patch::PatchSpec& spec) noexcept {
+  separate_field = true;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    grating_y_mm[i] = spec.gratings[i].centre.y_mm;
+    grating_r_deg[i] = spec.gratings[i].centre.r_deg;
+  }
+}
+
+namespace {
+
+using Basis = Eigen::Matrix<double, static_cast<int>(kGratings), 4>;
+
+// The field's least-squares part of v over the present gratings (rows of B zeroed where absent): B (B'B)^-1 B' v.
+// false when B'B is singular (the present gratings cannot carry the field).
+bool FieldPart(const Basis& b, const Eigen::LDLT<Eigen::Matrix4d>& btb, const Eigen::Matrix<double, 16, 1>& v,
+               Eigen::Matrix<double, 16, 1>& out) noexcept {
+  const Eigen::Vector4d c = btb.solve(b.transpose() * v);
+  if (!c.allFinite()) return false;
+  out = b * c;
+  return true;
+}
+
+// B'B of the present rows, factored; false when it is not positive definite enough to trust.
+bool Factor(const Basis& b, Eigen::LDLT<Eigen::Matrix4d>& out) noexcept {
+  const Eigen::Matrix4d btb = b.transpose() * b;
+  out.compute(btb);
+  if (out.info() != Eigen::Success || !out.isPositive()) return false;
+  // A zero pivot is not a failure for LDLT: ask for every pivot to be a real share of the largest.
+  const auto d = out.vectorD();
+  return d.minCoeff() > 1e-9 * std::max(1.0, d.maxCoeff());
+}
+
+}  // namespace
+
 RetareJudge::RetareJudge(const v1::ResponseMap& map, RetareConfig config) : model_(FromProto(map)), config_(config) {
   if (!(config_.min_force_n > 0) || !std::isfinite(config_.min_force_n)) {
     throw InputError("re-tare: min_force_n must be a positive number of newtons");
@@ -30,6 +68,29 @@ RetareJudge::RetareJudge(const v1::ResponseMap& map, RetareConfig config) : mode
   if (!(config_.min_shift_pm >= 0) || !std::isfinite(config_.min_shift_pm)) {
     throw InputError("re-tare: min_shift_pm must be a non-negative number of picometres");
   }
+  if (!config_.separate_field) return;
+  Basis b;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    const double r = config_.grating_r_deg[i] * std::numbers::pi / 180.0;
+    basis_[i] = {1.0, config_.grating_y_mm[i] / 100.0, std::cos(r), std::sin(r)};
+    if (!std::isfinite(basis_[i][1]) || !std::isfinite(basis_[i][2])) {
+      throw InputError("re-tare: the gratings' centres must be finite to separate a field");
+    }
+    for (int c = 0; c < 4; ++c) b(static_cast<int>(i), c) = basis_[i][static_cast<std::size_t>(c)];
+  }
+  Eigen::LDLT<Eigen::Matrix4d> btb;
+  if (!Factor(b, btb)) throw InputError("re-tare: the gratings' centres cannot carry a field (they lie on one line)");
+  own_g_.resize(model_.g.size());
+  own_gg_.resize(model_.g.size());
+  for (std::size_t node = 0; node < model_.g.size(); ++node) {
+    Eigen::Matrix<double, 16, 1> g, part;
+    for (std::size_t i = 0; i < kGratings; ++i) g(static_cast<int>(i)) = model_.g[node][i];
+    if (!FieldPart(b, btb, g, part)) part.setZero();
+    const Eigen::Matrix<double, 16, 1> own = g - part;
+    for (std::size_t i = 0; i < kGratings; ++i) own_g_[node][i] = static_cast<float>(own(static_cast<int>(i)));
+    own_gg_[node] = own.squaredNorm();
+  }
+  field_ready_ = true;
 }
 
 double RetareJudge::Force(double amplitude) const noexcept {
@@ -43,6 +104,31 @@ double RetareJudge::Force(double amplitude) const noexcept {
 RetareResult RetareJudge::Judge(const ShiftsPm& s) const noexcept {
   RetareResult r;
   r.y_mm = r.r_deg = std::numeric_limits<double>::quiet_NaN();
+  // The field's part of the shifts, over the present gratings (separate_field). With every grating present the
+  // nodes' field-free responses are the precomputed ones; with some missing they are computed here.
+  bool field = false, all_present = true;
+  int present = 0;
+  Basis b = Basis::Zero();
+  Eigen::Matrix<double, 16, 1> sv = Eigen::Matrix<double, 16, 1>::Zero(), s_own = sv;
+  Eigen::LDLT<Eigen::Matrix4d> btb;
+  if (field_ready_) {
+    for (std::size_t i = 0; i < kGratings; ++i) {
+      if (!std::isfinite(s[i])) {
+        all_present = false;
+        continue;
+      }
+      ++present;
+      sv(static_cast<int>(i)) = s[i];
+      for (int c = 0; c < 4; ++c) b(static_cast<int>(i), c) = basis_[i][static_cast<std::size_t>(c)];
+    }
+    Eigen::Matrix<double, 16, 1> part;
+    field = present >= kMinPeaksForField && Factor(b, btb) && FieldPart(b, btb, sv, part);
+    if (field) s_own = sv - part;
+  }
+  double ss = 0;  // the shifts' energy
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (std::isfinite(s[i])) ss += static_cast<double>(s[i]) * s[i];
+  }
   double best = 0.0;
   int best_node = -1;
   for (std::size_t node = 0; node < model_.g.size(); ++node) {
@@ -53,8 +139,35 @@ RetareResult RetareJudge::Judge(const ShiftsPm& s) const noexcept {
       sg += static_cast<double>(s[i]) * g[i];
       gg += static_cast<double>(g[i]) * g[i];
     }
-    if (!(gg > 0) || !(sg > 0)) continue;  // a press pushes: a negative amplitude explains nothing
-    const double a = sg / gg;
+    if (!(gg > 0)) continue;
+    double a = sg / gg;  // the touch takes every shift
+    if (field) {
+      // The plain reading stands where this touch alone explains the shifts (a touch-shaped pattern: a press
+      // with no field under it is never judged lighter than without the separation).
+      const double unexplained = ss > 0 ? 1.0 - (sg * sg) / (gg * ss) : 1.0;
+      const double plain = unexplained <= kTouchLikeMisfit ? a : 0.0;
+      // One touch plus a field: the touch's amplitude is the projection of the shifts' field-free part on the
+      // response's field-free part (least squares over both). Trusted only where the response keeps a real share
+      // of its energy outside the field's span.
+      double own_sg = 0, own_gg = 0;
+      if (all_present) {
+        const auto& og = own_g_[node];
+        for (std::size_t i = 0; i < kGratings; ++i) own_sg += s_own(static_cast<int>(i)) * og[i];
+        own_gg = own_gg_[node];
+      } else {
+        Eigen::Matrix<double, 16, 1> gv = Eigen::Matrix<double, 16, 1>::Zero(), part;
+        for (std::size_t i = 0; i < kGratings; ++i) {
+          if (std::isfinite(s[i])) gv(static_cast<int>(i)) = g[i];
+        }
+        if (FieldPart(b, btb, gv, part)) {
+          const Eigen::Matrix<double, 16, 1> own = gv - part;
+          own_sg = s_own.dot(own);
+          own_gg = own.squaredNorm();
+        }
+      }
+      if (own_gg >= kMinOwnShare * gg) a = std::max(own_sg / own_gg, plain);
+    }
+    if (!(a > 0)) continue;  // a press pushes: a negative amplitude explains nothing
     double peak = 0;  // the touch's largest shift on one grating
     for (std::size_t i = 0; i < kGratings; ++i) {
       if (std::isfinite(s[i])) peak = std::max(peak, a * std::abs(static_cast<double>(g[i])));

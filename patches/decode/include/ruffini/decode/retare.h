@@ -31,9 +31,11 @@
 #include <cstdint>
 #include <optional>
 #include <string_view>
+#include <vector>
 
 #include "ruffini/decode/inversion.h"
 #include "ruffini/decode/pipeline.h"
+#include "ruffini/patch/spec.h"
 #include "ruffini/v1/model.pb.h"
 
 namespace ruffini::decode {
@@ -60,6 +62,19 @@ struct RetareConfig {
   // absorbed there moves no grating by more than this: the pipeline's quiet_release_pm, below which a
   // frame is no contact.
   double min_shift_pm = 1.0;
+  // Separate a temperature field from a touch (docs/experiments/field-hours.md). The window's shifts are fitted
+  // as one touch plus a first-order field across the cover: a constant, a slope along Y, and the first harmonic
+  // around the limb (cos R, sin R), each at the gratings' centres. Only the touch is judged. A smooth field (a
+  // warm end, sunlight on one side) then explains no press, and a touch's force is estimated without bias
+  // whatever smooth field lies under it. With too few peaks for the fit (fewer than 8), or at a place whose
+  // response the field could mimic (less than kMinOwnShare of its energy outside the field's span), the judge
+  // falls back to the touch taking every shift (the conservative reading). Where one touch alone explains the
+  // shifts well (kTouchLikeMisfit), its plain reading counts too: a press with no field under it is never judged
+  // lighter than by the plain judge.
+  // Off: the touch takes every shift. SeparateField(spec) switches it on with the spec's grating centres.
+  bool separate_field = false;
+  std::array<double, kGratings> grating_y_mm{}, grating_r_deg{};
+  void SeparateField(const patch::PatchSpec& spec) noexcept;
 };
 
 struct RetareResult {
@@ -86,6 +101,22 @@ class RetareJudge {
   [[nodiscard]] double Force(double amplitude) const noexcept;
   ResponseModel model_;
   RetareConfig config_;
+  // separate_field: the field's basis at the gratings (columns 1, Y / 100 mm, cos R, sin R), and each node's
+  // response with its field part removed (every grating present), and that part's energy.
+  std::array<std::array<double, 4>, kGratings> basis_{};
+  std::vector<std::array<float, kGratings>> own_g_;
+  std::vector<double> own_gg_;
+  bool field_ready_ = false;
+
+ public:
+  // A touch's share of a place's response must hold at least this much of its energy for the field fit to judge
+  // it; below, the field could mimic the touch and the judge takes every shift.
+  static constexpr double kMinOwnShare = 0.05;
+  static constexpr int kMinPeaksForField = 8;
+  // With the field separated, a place's plain reading (the touch taking every shift) still counts where that
+  // touch alone leaves at most this share of the shifts' energy unexplained: the shifts look like a touch, not
+  // like a field, and the separation must not judge such a press lighter.
+  static constexpr double kTouchLikeMisfit = 0.5;
 };
 
 // The procedure over a stream: Start() when the operator asks, then Feed() every frame after the pipeline
