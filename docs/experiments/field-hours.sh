@@ -1,6 +1,6 @@
 #!/bin/sh
 # Issue 17's field-hours figures (docs/experiments/field-hours.md): every run of `ruffini field-hours`, validation
-# seeds 801-810 first (every choice), then the held-out seeds 901-910 (scored once). About 25 minutes on 2 cores.
+# seeds 801-810 first (every choice), then the held-out seeds 901-910 (scored once). About 45 minutes on 2 cores.
 # Usage: docs/experiments/field-hours.sh [BUILD_DIR] [OUT_DIR]
 set -eu
 B=${1:-build/release}/bin/ruffini
@@ -17,6 +17,18 @@ for g in 0.05 0.1 0.15 0.2 0.3; do
   $B field-hours --model $M/forearm-field.rmodel --scene $S/forearm-field.yaml --seeds 801-810 --gate-on-n $g \
     --retare --out "$OUT/val-gate$g"
 done
+# The re-tare judge with and without the field separated: the operator under a temperature field (validation),
+# and the dry run (a re-tare judged every 10 s, never applied) on five validation hours of the field scene.
+$B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml --seeds 801-810 --retare \
+  --out "$OUT/val-gradient-retare"
+$B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml --seeds 801-810 --retare \
+  --retare-plain --out "$OUT/val-gradient-retare-plain"
+for s in 801 802 803 804 805; do
+  $B simulate --scene $S/forearm-field.yaml --protocol field --seed $s --out "$OUT/v$s.h5"
+done
+R=${1:-build/release}/bin/retare_eval   # built with the tests: cmake --build --preset release --target retare_eval
+$R --model $M/forearm-field.rmodel --dry-run "$OUT"/v80[1-5].h5 > "$OUT/dry-run-plain.md"
+$R --model $M/forearm-field.rmodel --dry-run --separate-field "$OUT"/v80[1-5].h5 > "$OUT/dry-run-separated.md"
 # Held out, once: as shipped, and with the operator's re-tare; the embedded cast (40 pm/C) with and without a field.
 $B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
   --scene $S/forearm-field-nodrift.yaml --seeds 901-910 --out "$OUT/test"
@@ -26,3 +38,8 @@ $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradi
   --scene $S/forearm-field-embedded.yaml --seeds 901-910 --out "$OUT/test-embedded"
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
   --scene $S/forearm-field-embedded.yaml --seeds 901-910 --retare --out "$OUT/test-embedded-retare"
+# The same two with the plain re-tare judge (before the field was separated).
+$B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
+  --scene $S/forearm-field-nodrift.yaml --seeds 901-910 --retare --retare-plain --out "$OUT/test-retare-plain"
+$B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
+  --scene $S/forearm-field-embedded.yaml --seeds 901-910 --retare --retare-plain --out "$OUT/test-embedded-retare-plain"
