@@ -17,6 +17,9 @@ for g in 0.05 0.1 0.15 0.2 0.3; do
   $B field-hours --model $M/forearm-field.rmodel --scene $S/forearm-field.yaml --seeds 801-810 --gate-on-n $g \
     --retare --out "$OUT/val-gate$g"
 done
+# The next candidate (not shipped): faint contacts below 1 N refused.
+$B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
+  --seeds 801-810 --faint-refuse --out "$OUT/val-faint-refuse"
 # The re-tare judge with and without the field separated: the operator under a temperature field (validation),
 # and the dry run (a re-tare judged every 10 s, never applied) on five validation hours of the field scene.
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml --seeds 801-810 --retare \

@@ -130,6 +130,7 @@ void RegisterFieldHours(CLI::App& app) {
     std::string thermal_field = "model";
     bool retare = false, retare_plain = false;
     double gate_on_n = 0;  // 0: the model's
+    bool faint_refuse = false;
     double retare_every_s = 10.0;
     double retare_level_n = decode::RetareConfig{}.min_force_n;
   };
@@ -156,6 +157,8 @@ void RegisterFieldHours(CLI::App& app) {
                   "Experiment: the force gate's on level for every model (off at 0.8 x on, as trained); 0: each model's")
       ->check(CLI::Range(0.0, 2.0))
       ->capture_default_str();
+  cmd->add_flag("--faint-refuse", a->faint_refuse,
+                "Experiment: PipelineConfig::faint_refuse (no contact below 1 N on shifts a baseline error gives too)");
   cmd->add_flag("--retare", a->retare,
                 "The operator re-tares a stale patch (RetarePatch, judged against the model's response map) when it "
                 "goes stale and every --retare-every-s while it stays so (docs/experiments/retare.md)");
@@ -205,6 +208,7 @@ void RegisterFieldHours(CLI::App& app) {
           decode::PipelineConfig cfg;
           cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
           if (a->thermal_field != "model") cfg.baseline.thermal_field = a->thermal_field == "on";
+          cfg.faint_refuse = a->faint_refuse;
           const decode::Pipeline<float> pipe(m, patch.spec, cfg);
           eval::OperatorRetare op;
           op.map = m.has_response() ? &m.response() : nullptr;
@@ -231,6 +235,7 @@ void RegisterFieldHours(CLI::App& app) {
     if (rule.sd_k != 0) r << " --sd-k " << rule.sd_k;
     if (a->thermal_field != "model") r << " --thermal-field " << a->thermal_field;
     if (a->gate_on_n > 0) r << " --gate-on-n " << a->gate_on_n;
+    if (a->faint_refuse) r << " --faint-refuse";
     if (a->retare) r << " --retare --retare-every-s " << a->retare_every_s << " --retare-level-n " << a->retare_level_n;
     if (a->retare && a->retare_plain) r << " --retare-plain";
     r << " --out " << a->out << "`\n\n"
