@@ -143,7 +143,7 @@ RetareResult RetareJudge::Judge(const ShiftsPm& s) const noexcept {
     double a = sg / gg;  // the touch takes every shift
     if (field) {
       // The plain reading stands where this touch alone explains the shifts (a touch-shaped pattern: a press
-      // with no field under it is never judged lighter than without the separation).
+      // with no field under it keeps its plain reading at the places that explain it).
       const double unexplained = ss > 0 ? 1.0 - (sg * sg) / (gg * ss) : 1.0;
       const double plain = unexplained <= kTouchLikeMisfit ? a : 0.0;
       // One touch plus a field: the touch's amplitude is the projection of the shifts' field-free part on the

@@ -69,8 +69,9 @@ struct RetareConfig {
   // whatever smooth field lies under it. With too few peaks for the fit (fewer than 8), or at a place whose
   // response the field could mimic (less than kMinOwnShare of its energy outside the field's span), the judge
   // falls back to the touch taking every shift (the conservative reading). Where one touch alone explains the
-  // shifts well (kTouchLikeMisfit), its plain reading counts too: a press with no field under it is never judged
-  // lighter than by the plain judge.
+  // shifts well (kTouchLikeMisfit), its plain reading counts too, so a press with no field under it keeps its
+  // plain reading at the places that explain it (RetareField tests: refused wherever the plain judge refuses it,
+  // on a 10 mm grid over the patch).
   // Off: the touch takes every shift. SeparateField(spec) switches it on with the spec's grating centres.
   bool separate_field = false;
   std::array<double, kGratings> grating_y_mm{}, grating_r_deg{};
@@ -115,7 +116,7 @@ class RetareJudge {
   static constexpr int kMinPeaksForField = 8;
   // With the field separated, a place's plain reading (the touch taking every shift) still counts where that
   // touch alone leaves at most this share of the shifts' energy unexplained: the shifts look like a touch, not
-  // like a field, and the separation must not judge such a press lighter.
+  // like a field, and the separation must not judge such a press lighter there.
   static constexpr double kTouchLikeMisfit = 0.5;
 };
 
