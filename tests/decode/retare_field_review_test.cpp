@@ -236,6 +236,83 @@ TEST(RetareFieldReview, DISABLED_APressWithAOneGratingBaselineErrorAndNoFieldIsR
   EXPECT_EQ(flips, 0) << "of " << seen << " windows; worst " << worst;
 }
 
+// The findings above through Retare::Feed and the pipeline as the decoder service runs them (the twin's noise, the
+// tracker, the window's mean, head and tail), on the cobot forearm, outside the edge bands: a press held while an
+// offset (a field, or one grating's baseline error) that came after the baseline stands on the peaks. The plain
+// judge refuses each re-tare; the service's (SeparateField) accepts it, and the press is then in the baseline.
+struct FeedCase {
+  const char* what;
+  double y_mm, r_deg, force_n;
+  std::array<double, kGratings> offset_pm;  // on the peaks from 2 s before the press on (ramped in over 1 s)
+};
+RetareResult FeedRetare(const Rig& rig, const FeedCase& fc, bool separate) {
+  PipelineConfig pc;
+  pc.baseline = rig.baseline;
+  Pipeline<float> pipe(rig.model, rig.spec(), pc);
+  Pipeline<float>::Data data(pipe);
+  twin::InterrogatorSim sim(*rig.skin, 7);
+  RetareConfig rc{kLevel};
+  if (separate) rc.SeparateField(rig.spec());
+  Retare retare(&rig.model.response(), pipe.config().baseline, rc);
+  std::uint64_t frame = 0;
+  std::optional<RetareResult> result;
+  auto step = [&](double force_n, double offset_share) -> PipelineOutput {
+    twin::Shifts sh{};
+    std::uint32_t flags = 0;
+    const std::vector<twin::Contact> c{twin::Contact{{fc.y_mm, fc.r_deg}, force_n, rig.scene.probe}};
+    rig.skin->StrainShiftsPm(force_n > 0 ? std::span<const twin::Contact>(c) : std::span<const twin::Contact>(), sh, flags);
+    std::array<double, kGratings> wl{};
+    sim.Read(static_cast<double>(frame++) / 100.0, sh, wl, flags);
+    for (std::size_t i = 0; i < kGratings; ++i) wl[i] += offset_share * fc.offset_pm[i] * 1e-3;
+    const PipelineOutput o = pipe.Process(wl, flags, data);
+    if (retare.active()) {
+      if (auto r = retare.Feed(wl, o, data.baseline())) result = r;
+    }
+    return o;
+  };
+  for (int k = 0; k < 200; ++k) step(0.0, 0.0);
+  for (int k = 1; k <= 100; ++k) step(0.0, k / 100.0);
+  for (int k = 0; k < 100; ++k) step(0.0, 1.0);
+  for (int k = 1; k <= 30; ++k) step(fc.force_n * k / 30.0, 1.0);
+  for (int k = 0; k < 50; ++k) step(fc.force_n, 1.0);
+  float before = 0.0f;
+  for (int k = 0; k < 50; ++k) before = std::max(before, step(fc.force_n, 1.0).force_n);
+  EXPECT_TRUE(retare.Start());
+  for (int k = 0; k < 1000 && !result; ++k) step(fc.force_n, 1.0);
+  EXPECT_TRUE(result.has_value());
+  if (result && result->outcome == RetareOutcome::kAccepted) {
+    pipe.Retare(retare.baseline_nm(), data);
+    float after = 0.0f;
+    for (int k = 0; k < 100; ++k) after = std::max(after, step(fc.force_n, 1.0).force_n);
+    ADD_FAILURE() << "accepted under the press: the networks read the press and the field at " << before
+                  << " N before (the field reads as a phantom), " << after
+                  << " N after the re-tare with the press still held (absorbed)";
+  }
+  return result.value_or(RetareResult{RetareOutcome::kInterrupted});
+}
+
+TEST(RetareFieldReview, DISABLED_ThroughThePipelineAHeldPressIsRefusedWhereThePlainJudgeRefusesIt) {
+  const Rig& rig = Cobot();
+  std::array<double, kGratings> error{};
+  error[2] = -3.0;
+  // (Two more of the judge-level cases, 1.5 N at (57.5, 117.5) with grating 2 3 pm low and 1.5 N at (122.5, 22.5)
+  // under an around-only field warm at R 145, are refused through the pipeline: the window's noise lifts the
+  // separated reading over the level there.)
+  const FeedCase cases[] = {
+      {"around-only field warm at R 0", 57.5, 122.5, 0.75,
+       rig.Field([](double, double r) { return 40.0 * std::cos(Rad(r)); })},
+      {"around-only field warm at R 0", 37.5, 22.5, 1.5,
+       rig.Field([](double, double r) { return 40.0 * std::cos(Rad(r)); })},
+  };
+  for (const FeedCase& fc : cases) {
+    SCOPED_TRACE(::testing::Message() << fc.force_n << " N at (" << fc.y_mm << ", " << fc.r_deg << "), " << fc.what);
+    const RetareResult plain = FeedRetare(rig, fc, false), sep = FeedRetare(rig, fc, true);
+    EXPECT_EQ(plain.outcome, RetareOutcome::kPressing) << RetareOutcomeName(plain.outcome) << " " << plain.force_n;
+    EXPECT_EQ(sep.outcome, RetareOutcome::kPressing)
+        << RetareOutcomeName(sep.outcome) << ", " << sep.force_n << " N at (" << sep.y_mm << ", " << sep.r_deg << ")";
+  }
+}
+
 // The judge's own arithmetic, exactly: on a map whose every node holds one response g (the twin's at a place, per
 // newton), shifts F g plus a first-order field are read at F, with every peak present and with peaks missing (the
 // per-node path that removes the field over the present gratings only). This pins that path: using the every-peak
