@@ -225,6 +225,7 @@ void Grid(const Rig& rig) {
   const auto grid = PressGrid(rig, {0.75, 1.0, 1.5, 2.0, 3.0, 5.0});
   for (const auto& nf : Fields(arc)) {
     if (std::getenv("ALONE")) break;
+    if (const char* only = std::getenv("FIELDS"); only != nullptr && std::string(only).find(nf.name) == std::string::npos) continue;
     const auto field = FieldAt(rig, nf.f);
     Tally t;
     t.list = std::getenv("LIST") != nullptr && nf.name.find(std::getenv("LIST")) == 0;
