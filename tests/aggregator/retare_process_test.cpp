@@ -86,6 +86,44 @@ class Operator {
 
 bool Stale(const v1::PatchStatus& p) { return p.last_heartbeat().baseline_state() == v1::BASELINE_STATE_STALE; }
 
+// Review 6 (docs/reviews/retare-field.md): the decoder service's field-separating judge, end to end. A field across
+// the cover (around the limb only, 1 C) makes the patch stuck; a 1.5 N press held at (37.5, 22.5), outside the edge
+// bands, must refuse a re-tare (the plain judge refuses it). Open: the service accepts it and the press goes into the
+// baseline.
+TEST(RetareProcess, DISABLED_AFieldStuckPatchRefusesAReTareWhileAPressOutsideTheEdgeBandsIsHeld) {
+  const std::string scenario = kSrc + "/tests/aggregator/retare-field-review-scenario.yaml";
+  const std::string base = (fs::current_path() / "retare_field_review").string();
+  int grpc_port = 0, sim_port = 0, decoder_metrics = 0;
+  rt::Process agg = rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
+                                        "--metrics", "127.0.0.1:0", "--patch-silence-ms", "200", "--patch-freshness-ms", "200"},
+                                       base + "/aggregator", "grpc", grpc_port);
+  const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
+  Operator op(address);
+  rt::Process sim = rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", scenario, "--rate-hz", "1000",
+                                        "--command-port", "0", "--stream-port", "0"},
+                                       base + "/sim", "stream", sim_port);
+  const auto sim_started = std::chrono::steady_clock::now();
+  auto sim_s = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - sim_started).count(); };
+  rt::Process decoder = rt::StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--interrogator",
+                                            "127.0.0.1:" + std::to_string(sim_port), "--aggregator", address, "--metrics",
+                                            "127.0.0.1:0", "--rate-hz", "1000", "--silence-ms", "100",
+                                            "--freshness-budget-ms", "200", "--max-frozen-s", "2"},
+                                           base + "/decoder", "metrics", decoder_metrics);
+  const std::uint64_t run = op.Status().aggregator_run_id();
+  ASSERT_NE(run, 0u);
+  ASSERT_TRUE(rt::WaitFor([&] { return op.Reset().accepted(); }, 10s, 100ms)) << agg.stderr_text() << decoder.stderr_text();
+  // The field's phantom: stale, FAULT, the robot held.
+  ASSERT_TRUE(rt::WaitFor([&] { return Stale(op.Patch()); }, 15s, 20ms)) << decoder.stderr_text();
+  ASSERT_TRUE(rt::WaitFor([&] { return op.Status().safety().state() == v1::SafetyState::STATE_FAULT; }, 2s, 20ms));
+  ASSERT_LT(sim_s(), 11.0) << "the machine is too slow for this scenario's timeline";
+  // In the middle of the press's hold (12.3 to 34.3 s at the sim's clock): refused.
+  ASSERT_TRUE(rt::WaitFor([&] { return sim_s() > 20.0; }, 25s, 50ms));
+  const auto pressing = op.RetareAndWait(run);
+  EXPECT_LT(sim_s(), 33.0) << "the answer came after the press ended: the timeline did not hold";
+  EXPECT_EQ(pressing.outcome(), v1::RETARE_OUTCOME_PRESSING) << pressing.DebugString();
+  EXPECT_TRUE(Stale(op.Patch()));
+}
+
 TEST(RetareProcess, AStuckPatchIsRefusedUnderAPressAcceptedAfterItHealsAndAResetClears) {
   const std::string base = (fs::current_path() / "retare_chain").string();
   int grpc_port = 0, sim_port = 0, decoder_metrics = 0;
