@@ -23,9 +23,9 @@ $B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene
 # The re-tare judge with and without the field separated: the operator under a temperature field (validation),
 # and the dry run (a re-tare judged every 10 s, never applied) on five validation hours of the field scene.
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml --seeds 801-810 --retare \
-  --out "$OUT/val-gradient-retare"
+  --retare-field --out "$OUT/val-gradient-retare-field"
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml --seeds 801-810 --retare \
-  --retare-plain --out "$OUT/val-gradient-retare-plain"
+  --out "$OUT/val-gradient-retare-plain"
 for s in 801 802 803 804 805; do
   $B simulate --scene $S/forearm-field.yaml --protocol field --seed $s --out "$OUT/v$s.h5"
 done
@@ -41,8 +41,8 @@ $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradi
   --scene $S/forearm-field-embedded.yaml --seeds 901-910 --out "$OUT/test-embedded"
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
   --scene $S/forearm-field-embedded.yaml --seeds 901-910 --retare --out "$OUT/test-embedded-retare"
-# The same two with the plain re-tare judge (before the field was separated).
+# The same two with the experimental field-separating judge (off in the service: review 6).
 $B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
-  --scene $S/forearm-field-nodrift.yaml --seeds 901-910 --retare --retare-plain --out "$OUT/test-retare-plain"
+  --scene $S/forearm-field-nodrift.yaml --seeds 901-910 --retare --retare-field --out "$OUT/test-retare-field"
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
-  --scene $S/forearm-field-embedded.yaml --seeds 901-910 --retare --retare-plain --out "$OUT/test-embedded-retare-plain"
+  --scene $S/forearm-field-embedded.yaml --seeds 901-910 --retare --retare-field --out "$OUT/test-embedded-retare-field"

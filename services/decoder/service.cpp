@@ -639,9 +639,9 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
       }
     }
   }
-  // The judge separates a smooth temperature field from a touch: a field across the cover is not refused as a
-  // press (docs/experiments/field-hours.md; on validation it refused every pressed window the plain judge did).
-  s.retare.SeparateField(s.patch->spec);
+  // The re-tare judge does not separate a temperature field from a touch (RetareConfig::separate_field stays
+  // off): review 6 made the separating judge accept a held 1.5 N press outside the edge bands, end to end
+  // (docs/reviews/retare-field.md; RetareProcess.AFieldStuckPatchRefusesAReTareWhileAPressOutsideTheEdgeBandsIsHeld).
   s.pipeline = link::MakePipeline(s.model, s.patch->spec, s.pipeline_config, s.choice);
   s.monitor_config.sample_rate_hz = s.config.rate_hz;
   s.monitor_config.heartbeat_period_ns = static_cast<std::int64_t>(s.config.heartbeat_ms * 1e6);

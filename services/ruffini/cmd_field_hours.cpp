@@ -128,7 +128,7 @@ void RegisterFieldHours(CLI::App& app) {
     double duration_s = 3600.0, rate_hz = 100.0;
     eval::StopRuleModel rule;
     std::string thermal_field = "model";
-    bool retare = false, retare_plain = false;
+    bool retare = false, retare_field = false;
     double gate_on_n = 0;  // 0: the model's
     bool faint_refuse = false;
     double retare_every_s = 10.0;
@@ -162,9 +162,9 @@ void RegisterFieldHours(CLI::App& app) {
   cmd->add_flag("--retare", a->retare,
                 "The operator re-tares a stale patch (RetarePatch, judged against the model's response map) when it "
                 "goes stale and every --retare-every-s while it stays so (docs/experiments/retare.md)");
-  cmd->add_flag("--retare-plain", a->retare_plain,
-                "With --retare: the judge before it separated a temperature field from a touch (the decoder service "
-                "separates it: RetareConfig::separate_field)");
+  cmd->add_flag("--retare-field", a->retare_field,
+                "Experiment, with --retare: the judge separates a first-order temperature field from a touch "
+                "(RetareConfig::separate_field; off in the decoder service: review 6, docs/reviews/retare-field.md)");
   cmd->add_option("--retare-every-s", a->retare_every_s, "With --retare: seconds between requests")
       ->check(CLI::Range(0.5, 3600.0))
       ->capture_default_str();
@@ -214,7 +214,7 @@ void RegisterFieldHours(CLI::App& app) {
           op.map = m.has_response() ? &m.response() : nullptr;
           op.config.min_force_n = a->retare_level_n;
           op.every_s = a->retare_every_s;
-          if (!a->retare_plain) op.config.SeparateField(patch.spec);  // as the decoder service
+          if (a->retare_field) op.config.SeparateField(patch.spec);  // off in the decoder service
           const eval::StreamPredictions p = a->retare ? eval::DecodeStream(pipe, d, op) : eval::DecodeStream(pipe, d);
           hours.push_back({scene_name, seed, label, eval::ScoreStops(d, p, patch.spec, a->rule), op});
         }
@@ -237,7 +237,7 @@ void RegisterFieldHours(CLI::App& app) {
     if (a->gate_on_n > 0) r << " --gate-on-n " << a->gate_on_n;
     if (a->faint_refuse) r << " --faint-refuse";
     if (a->retare) r << " --retare --retare-every-s " << a->retare_every_s << " --retare-level-n " << a->retare_level_n;
-    if (a->retare && a->retare_plain) r << " --retare-plain";
+    if (a->retare && a->retare_field) r << " --retare-field";
     r << " --out " << a->out << "`\n\n"
       << "Each run is `ruffini simulate --protocol field` (press, hold up to 120 s, release, rest; log-uniform peaks "
          "0.1-2.5 N; the same seed gives the same run), decoded by `decode::Pipeline` as the decoder service does, "
@@ -292,8 +292,8 @@ void RegisterFieldHours(CLI::App& app) {
       r << "\nThe operator re-tares a stale patch (`--retare`): asked when the patch goes `baseline_stale` and every "
         << F("%.0f", a->retare_every_s) << " s while it stays so, judged against the model's response map (a touch of "
         << F("%.2f", a->retare_level_n) << " N or more refuses it; "
-        << (a->retare_plain ? "the plain judge: the touch takes every shift"
-                            : "a smooth temperature field separated from the touch, as the decoder service judges")
+        << (a->retare_field ? "experiment: a smooth temperature field separated from the touch (off in the service)"
+                            : "the touch takes every shift, as the decoder service judges")
         << ").\n\n"
         << "| scene | model | re-tares asked | accepted | refused: something presses (of them while nothing did) / other | accepted while a press "
            "was on (largest true force in the window) |\n| --- | --- | --- | --- | --- | --- |\n";

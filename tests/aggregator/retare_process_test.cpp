@@ -86,11 +86,11 @@ class Operator {
 
 bool Stale(const v1::PatchStatus& p) { return p.last_heartbeat().baseline_state() == v1::BASELINE_STATE_STALE; }
 
-// Review 6 (docs/reviews/retare-field.md): the decoder service's field-separating judge, end to end. A field across
-// the cover (around the limb only, 1 C) makes the patch stuck; a 1.5 N press held at (37.5, 22.5), outside the edge
-// bands, must refuse a re-tare (the plain judge refuses it). Open: the service accepts it and the press goes into the
-// baseline.
-TEST(RetareProcess, DISABLED_AFieldStuckPatchRefusesAReTareWhileAPressOutsideTheEdgeBandsIsHeld) {
+// Review 6 (docs/reviews/retare-field.md), end to end. A field across the cover (around the limb only, 1 C) makes
+// the patch stuck; a 1.5 N press held at (37.5, 22.5), outside the edge bands, must refuse a re-tare. With the
+// field-separating judge on in the service (commit 4e97a65) the service accepted it and the press went into the
+// baseline; the service now judges as before (the touch takes every shift) and refuses.
+TEST(RetareProcess, AFieldStuckPatchRefusesAReTareWhileAPressOutsideTheEdgeBandsIsHeld) {
   const std::string scenario = kSrc + "/tests/aggregator/retare-field-review-scenario.yaml";
   const std::string base = (fs::current_path() / "retare_field_review").string();
   int grpc_port = 0, sim_port = 0, decoder_metrics = 0;

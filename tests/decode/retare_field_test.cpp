@@ -1,5 +1,7 @@
 // The re-tare judge with a temperature field separated from a touch (RetareConfig::separate_field,
-// docs/experiments/field-hours.md). Under a field across the cover, the plain judge reads the field as a press
+// docs/experiments/field-hours.md): an experiment, off in the decoder service. These tests hold on their 10 mm grid
+// and one field shape; review 6 (docs/reviews/retare-field.md, tests/decode/retare_field_review_test.cpp) found
+// places, forces and field shapes where it accepts a press the plain judge refuses. Under a field across the cover, the plain judge reads the field as a press
 // and never accepts, which left a field-stuck patch stuck. The field-separating judge must accept a field with
 // nothing pressing. It must also refuse a real press (the twin's strain, not the map's own response) wherever
 // the plain judge refuses it, with or without a field under it, and with peaks missing.

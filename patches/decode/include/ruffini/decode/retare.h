@@ -73,6 +73,8 @@ struct RetareConfig {
   // plain reading at the places that explain it (RetareField tests: refused wherever the plain judge refuses it,
   // on a 10 mm grid over the patch).
   // Off: the touch takes every shift. SeparateField(spec) switches it on with the spec's grating centres.
+  // EXPERIMENTAL, off in the decoder service: review 6 (docs/reviews/retare-field.md) made it accept a held 1.5 N
+  // press the plain judge refuses, end to end; its probes (tests/decode/retare_field_review_test.cpp) gate it.
   bool separate_field = false;
   std::array<double, kGratings> grating_y_mm{}, grating_r_deg{};
   void SeparateField(const patch::PatchSpec& spec) noexcept;
