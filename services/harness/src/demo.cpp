@@ -828,15 +828,23 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     double fault_with_s = 0, fault_without_s = 0, unobserved_s = 0;
     std::map<std::uint64_t, std::string> uncaused_epochs;  // epoch -> its cause
     std::size_t hp = 0;
+    // A contact latched while FAULT (a new epoch, the state stays FAULT) does not explain the FAULT: the last
+    // epoch with a fault's cause does.
+    std::optional<SafetyRecord> fault_epoch;
     for (std::size_t k = 0; k + 1 < safety.size(); ++k) {
-      const auto& r = safety[k];
-      if (r.arrival_ns >= stop_ns) break;
-      if (r.state.state() != v1::SafetyState::STATE_FAULT) continue;
-      const std::int64_t dt = std::min(safety[k + 1].arrival_ns, stop_ns) - r.arrival_ns;
+      const auto& rec = safety[k];
+      if (rec.arrival_ns >= stop_ns) break;
+      if (rec.state.state() != v1::SafetyState::STATE_FAULT) {
+        fault_epoch.reset();
+        continue;
+      }
+      if (rec.state.cause().kind() != v1::SafetyCause::KIND_CONTACT || !fault_epoch) fault_epoch = rec;
+      const SafetyRecord& r = *fault_epoch;
+      const std::int64_t dt = std::min(safety[k + 1].arrival_ns, stop_ns) - rec.arrival_ns;
       const std::int64_t counted_ns = std::min(dt, kMaxGapNs);
       unobserved_s += static_cast<double>(dt - counted_ns) / 1e9;
       const double counted = static_cast<double>(counted_ns) / 1e9;
-      const std::int64_t mid = r.arrival_ns + counted_ns / 2;
+      const std::int64_t mid = rec.arrival_ns + counted_ns / 2;
       const std::int64_t latched = latched_ns[r.state.stop_epoch()];
       const bool startup = r.state.cause().kind() == v1::SafetyCause::KIND_STARTUP;
       const bool state_caused = startup || InAny(state_causes, mid) || InAny(state_causes, latched);
@@ -850,7 +858,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
         const bool caused = startup || InAny(causes[i], mid) || (named && InAny(causes[i], latched));
         (caused ? with_s : without_s)[i] += counted;
         if (caused) continue;
-        const double from = rel(r.arrival_ns), to = from + counted;
+        const double from = rel(rec.arrival_ns), to = from + counted;
         if (!stretches[i].empty() && std::abs(stretches[i].back().second - from) < 0.05) {
           stretches[i].back().second = to;
         } else {
@@ -913,6 +921,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
           " s without one");
     }
     for (std::size_t i = 0; i < patches.size(); ++i) {
+      std::erase_if(stretches[i], [](const std::pair<double, double>& st) { return st.second - st.first < 0.005; });
       if (stretches[i].empty()) continue;
       m << "\n" << patches[i] << " in FAULT without a present cause:";
       for (std::size_t k = 0; k < stretches[i].size() && k < 8; ++k) {
