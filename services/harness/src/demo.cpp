@@ -166,9 +166,10 @@ class Observer {
   std::atomic<bool> safety_ended_{false};
 };
 
-// The aggregator's view of each patch (GetStatus every 10 ms): when each was healthy. A patch that is not
+// The aggregator's view of each patch (GetStatus every 100 ms): when each was healthy. A patch that is not
 // healthy (no stream, silent, a fault in force, its baseline still being captured) holds the safety state in
-// FAULT.
+// FAULT. Not more often: a status carries every patch's sensitivity maps (about 50 kB on the cobot), and the
+// demo shares the machine with the processes it checks.
 class HealthPoller {
  public:
   struct Sample {
@@ -193,7 +194,7 @@ class HealthPoller {
               std::lock_guard lock(mu_);
               samples_.push_back(std::move(s));
             }
-            std::this_thread::sleep_for(10ms);
+            std::this_thread::sleep_for(100ms);
           }
         }) {}
   ~HealthPoller() { Stop(); }
@@ -228,7 +229,7 @@ struct CauseWindow {
 bool InAny(const std::vector<CauseWindow>& w, std::int64_t t_ns) {
   return std::any_of(w.begin(), w.end(), [t_ns](const CauseWindow& c) { return t_ns >= c.from_ns && t_ns < c.to_ns; });
 }
-// Gaps between samples longer than this are not counted (the poll or the stream said nothing then).
+// Gaps between safety states longer than this are not counted (the stream said nothing then).
 constexpr std::int64_t kMaxGapNs = 100'000'000;
 
 struct Event {
@@ -817,7 +818,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     }
     if (frozen_ns > 0) state_causes.push_back({frozen_ns, thawed_ns > 0 ? thawed_ns : stop_ns});
     // The time in FAULT, on the safety stream (a state every 10 ms). A FAULT is on a patch's account when its
-    // cause names the patch or the aggregator reported the patch not healthy then (the poll). It had a present
+    // cause names the patch or the aggregator reported the patch not healthy then (the latest poll). It had a present
     // cause when a scripted cause was present at that moment or when its epoch latched (the latch holds it until
     // the operator's reset); the start-up's FAULT always has one.
     std::map<std::uint64_t, std::int64_t> latched_ns;
@@ -872,7 +873,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
          "when it made it (stored in the model file: the gain fit's objective, median force error mN + 10 x median "
          "location error mm, on the presses it used; both models on later presses of the same recording, held out "
          "from every fit), and how long the safety state was FAULT on the patch's account (its cause names the "
-         "patch, or the aggregator reported the patch not healthy, polled every 10 ms): with a present cause (a "
+         "patch, or the aggregator reported the patch not healthy, polled every 100 ms): with a present cause (a "
          "scripted one present then or when the FAULT latched: the start-up and the patch's baseline capture; for "
       << killed_patch
       << ", its decoder killed until the restarted one is healthy) and without one (nothing scripted explains it: "
