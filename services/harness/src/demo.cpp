@@ -945,7 +945,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
       if (uncaused_epochs.size() > 5) m << " and " << uncaused_epochs.size() - 5 << " more";
     }
     m << ".";
-    if (unobserved_s > 0) m << " Not observed (gaps over 100 ms between polls): " << Fmt("%.2f", unobserved_s) << " s.";
+    if (unobserved_s > 0) m << " Not observed (gaps over 100 ms between safety states): " << Fmt("%.2f", unobserved_s) << " s.";
     m << "\n";
     // What the field did over this run (the sim's clock starts at its sample 0, t0).
     const double run_s = static_cast<double>(stop_ns - t0) / 1e9;
@@ -953,8 +953,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     m << "\nField conditions (`twin:` of the scene): ";
     if (!fx.viscoelastic && !fx.temperature) m << "none (a lab scene).";
     if (fx.viscoelastic) {
-      double g = 0;
-      g = fx.viscoelastic->total_creep();
+      const double g = fx.viscoelastic->total_creep();
       m << "a viscoelastic cover (creep " << Fmt("%.0f", 100.0 * g) << " % in all, " << fx.viscoelastic->terms.size()
         << " terms); ";
     }
