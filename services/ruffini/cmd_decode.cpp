@@ -484,7 +484,7 @@ void RegisterCalibrate(CLI::App& app) {
                   before->location_error_mm(), after.location_error_mm());
       *summary.mutable_held_out_before() = *before;
       *summary.mutable_held_out_after() = after;
-    } else {
+    } else if (a->indentations > 0) {
       spdlog::warn("{}: no indentations after the first {} to score the calibration on", a->data, a->indentations);
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
