@@ -55,7 +55,7 @@ void RegisterBenchAggregator(CLI::App& app) {
     bool no_micro = false;
   };
   auto a = std::make_shared<Args>();
-  a->o.cobot_scene = RUFFINI_DEMO_SCENE;
+  a->o.cobot_scene = RUFFINI_COBOT_SCENE;
   a->o.out_dir = "docs/bench";
   CLI::App* cmd = app.add_subcommand(
       "bench-aggregator",
@@ -104,7 +104,7 @@ void RegisterBenchAggregator(CLI::App& app) {
     if (o.touch_period_s != 1.5) o.command += " --touch-period-s " + Num(o.touch_period_s);
     if (a->no_micro) o.command += " --no-micro";
     else if (a->micro_min_time_s != 0.5) o.command += " --micro-min-time-s " + Num(a->micro_min_time_s);
-    if (o.cobot_scene != RUFFINI_DEMO_SCENE) o.command += " --scene " + o.cobot_scene;
+    if (o.cobot_scene != RUFFINI_COBOT_SCENE) o.command += " --scene " + o.cobot_scene;
     const auto log = [](const std::string& s) { spdlog::info("bench-aggregator: {}", s); };
 
     Machine machine = MachineNow();

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 #include <limits>
+#include <optional>
 #include <set>
 #include <memory>
 #include <sstream>
@@ -431,6 +432,12 @@ void RegisterCalibrate(CLI::App& app) {
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
       return;
     }
+    // Indentations after the ones calibrated on, held out from every fit: both models scored on them.
+    constexpr std::size_t kHeldOutMax = 200;
+    const std::vector<std::int32_t> held_out = eval::IndentationsAfter(md.data, a->indentations, kHeldOutMax);
+    const std::optional<v1::CastScore> before =
+        held_out.empty() ? std::nullopt : std::optional(eval::ScoreIndentations(md.model, md.spec, md.data, held_out));
+    v1::CastCalibration summary;
     if (a->gains) {
       const eval::GainFit g = eval::FitGains(m, md.spec, cal, a->sweeps, [](int s, int n, double obj) {
         spdlog::info("gain fit: sweep {}/{}, objective {:.2f}", s, n, obj);
@@ -440,6 +447,8 @@ void RegisterCalibrate(CLI::App& app) {
       cc->clear_grating_gain();
       for (float v : g.gain) cc->add_grating_gain(v);
       std::printf("gains fitted: objective %.2f -> %.2f (%d evaluations)\n", g.before, g.after, g.evaluations);
+      summary.set_objective_before(g.before);
+      summary.set_objective_after(g.after);
       if (a->creep_data.empty() && m.preprocessing().thermal_ratio_size() > 0) {
         // Thermal ratios belong to a cast: another cast's would be wrong. Unit ratios until --field-data.
         m.mutable_preprocessing()->clear_thermal_ratio();
@@ -468,11 +477,31 @@ void RegisterCalibrate(CLI::App& app) {
     }
     *m.mutable_input_range() = eval::FitInputRange(m, md.spec, cal);
     *m.mutable_uncertainty() = eval::FitUncertainty(m, md.spec, cal);
+    if (before) {
+      const v1::CastScore after = eval::ScoreIndentations(m, md.spec, md.data, held_out);
+      std::printf("on %u held-out indentations of %s: median force error %.1f -> %.1f mN, location error %.2f -> %.2f mm\n",
+                  after.indentations(), a->data.c_str(), before->force_error_mn(), after.force_error_mn(),
+                  before->location_error_mm(), after.location_error_mm());
+      *summary.mutable_held_out_before() = *before;
+      *summary.mutable_held_out_after() = after;
+    } else if (a->indentations > 0) {
+      spdlog::warn("{}: no indentations after the first {} to score the calibration on", a->data, a->indentations);
+    }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     auto* cc = m.mutable_cast_calibration();
     cc->set_indentations(static_cast<std::uint32_t>(a->indentations));
     cc->set_dataset(a->data);
     cc->set_seconds(seconds);
+    cc->set_start_model(a->model);
+    cc->set_objective_before(summary.objective_before());
+    cc->set_objective_after(summary.objective_after());
+    if (summary.has_held_out_before()) {
+      *cc->mutable_held_out_before() = summary.held_out_before();
+      *cc->mutable_held_out_after() = summary.held_out_after();
+    } else {
+      cc->clear_held_out_before();
+      cc->clear_held_out_after();
+    }
     decode::ValidateModel(m, a->out);
     decode::SaveModel(a->out, m);
     print_uncertainty(m.uncertainty());

@@ -3,8 +3,11 @@
 
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <string>
 #include <unistd.h>
+
+#include <yaml-cpp/yaml.h>
 
 #include "ruffini/error.h"
 #include "ruffini/scene_file.h"
@@ -29,6 +32,43 @@ TEST(SceneFile, TheCobotScene) {
   }
   EXPECT_EQ(s.FindPatch("forearm_b"), &s.patches[1]);
   EXPECT_EQ(s.FindPatch("hand"), nullptr);
+}
+
+// The demo's field scenes (issue 17) are cobot.yaml with each patch its own cast and model and field effects:
+// the robot, every patch's spec, mount and region, and the safety section stay cobot.yaml's, so the demo checks
+// the same thresholds and deadlines on the same arm; cobot-field-gradient.yaml is cobot-field.yaml plus the
+// temperature field and nothing else.
+TEST(SceneFile, TheFieldScenesAreTheCobotWithTheirOwnCastsModelsAndEffects) {
+  const std::string dir = RUFFINI_SOURCE_DIR "/config/scenes/";
+  const YAML::Node lab = YAML::LoadFile(dir + "cobot.yaml");
+  const YAML::Node field = YAML::LoadFile(dir + "cobot-field.yaml");
+  const YAML::Node gradient = YAML::LoadFile(dir + "cobot-field-gradient.yaml");
+  const auto dump = [](const YAML::Node& n) { return YAML::Dump(n); };
+  for (const YAML::Node& f : {field, gradient}) {
+    EXPECT_EQ(f["name"].as<std::string>(), lab["name"].as<std::string>());
+    EXPECT_EQ(dump(f["robot"]), dump(lab["robot"]));
+    EXPECT_EQ(dump(f["safety"]), dump(lab["safety"]));
+    ASSERT_EQ(f["patches"].size(), lab["patches"].size());
+    for (std::size_t i = 0; i < lab["patches"].size(); ++i) {
+      for (const char* key : {"name", "spec", "mount", "region"}) {
+        EXPECT_EQ(dump(f["patches"][i][key]), dump(lab["patches"][i][key])) << key;
+      }
+      EXPECT_EQ(f["patches"][i]["model"].as<std::string>(),
+                "../models/cobot-field-" + lab["patches"][i]["name"].as<std::string>() + ".rmodel");
+    }
+  }
+  EXPECT_EQ(dump(gradient["patches"]), dump(field["patches"]));
+  EXPECT_FALSE(field["twin"]["effects"]["temperature"]["gradient"]);
+  ASSERT_TRUE(gradient["twin"]["effects"]["temperature"]["gradient"]);
+  YAML::Node without = YAML::Clone(gradient["twin"]);
+  without["effects"]["temperature"].remove("gradient");
+  EXPECT_EQ(dump(without), dump(field["twin"]));
+  // Four casts, one per patch, none of them the lab's (0) or docs/experiments/field.md's test casts (1, 2).
+  ASSERT_EQ(field["twin"]["casts"].size(), 4u);
+  std::set<long> seeds;
+  for (const auto& c : field["twin"]["casts"]) seeds.insert(c["skin_sample"].as<long>());
+  EXPECT_EQ(seeds.size(), 4u);
+  for (long s : seeds) EXPECT_GT(s, 2) << s;
 }
 
 TEST(SceneFile, TheBenchSceneHasNoRobotOrSafety) {

@@ -1,6 +1,9 @@
 // ruffini::sim without sockets: the replay source and the command replies.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <cstring>
 #include <vector>
 
@@ -207,6 +210,42 @@ TEST(ScriptedSource, AViscoelasticSceneCreepsUnderAHeldPressAndLeavesAResidual) 
   EXPECT_LT(d_late, d_early * 1.15);
   EXPECT_GT(d_after, 0.02 * d_early);      // a residual after release
   EXPECT_LT(d_after, 0.2 * d_early);
+}
+
+// Two presses at once on one patch of a viscoelastic scene (the demo's two touches under field conditions): each
+// press creeps with its own filter and both load the patch. The sim once drove one filter per patch with the
+// latest press only, so the other touch was never felt.
+TEST(ScriptedSource, TwoPressesAtOnceOnAViscoelasticPatchBothLoadIt) {
+  const auto scene = twin::LoadScene(std::string(RUFFINI_SOURCE_DIR) + "/config/scenes/forearm-field-nodrift.yaml");
+  ASSERT_TRUE(scene.effects.viscoelastic.has_value());
+  const sim::Press a{0.5, 0, 24.0, 42.5, 2.0, 0.05, 3.0, 0.05}, b{0.5, 0, 100.0, 102.5, 2.0, 0.05, 3.0, 0.05};
+  auto run = [&](std::vector<sim::Press> presses) {
+    sim::Scenario s;
+    s.duration_s = 10.0;
+    s.presses = std::move(presses);
+    sim::ScriptedSource src(scene, s, 1000.0);
+    std::vector<Wavelengths> w(1), rest(1), held(1);
+    for (std::uint64_t k = 0; k <= 2500; ++k) {  // rising k: the filters step once per sample
+      src.Sample(k, w);
+      if (k == 400) rest = w;
+      if (k == 2500) held = w;  // 1.95 s into the hold
+    }
+    std::array<double, kGratings> d{};
+    for (std::size_t g = 0; g < kGratings; ++g) d[g] = (held[0][g] - rest[0][g]) * 1e3;  // pm
+    return d;
+  };
+  const auto only_a = run({a}), only_b = run({b}), both = run({a, b});
+  double a_max = 0, b_max = 0, misfit = 0;
+  for (std::size_t g = 0; g < kGratings; ++g) {
+    a_max = std::max(a_max, std::abs(only_a[g]));
+    b_max = std::max(b_max, std::abs(only_b[g]));
+    misfit = std::max(misfit, std::abs(both[g] - only_a[g] - only_b[g]));
+  }
+  EXPECT_GT(a_max, 10.0);  // each press alone: above 10 pm somewhere at 2 N
+  EXPECT_GT(b_max, 10.0);
+  // Both at once: the sum of each alone (the twin superposes contacts; the same seed, the same noise), far from
+  // either alone.
+  EXPECT_LT(misfit, 0.1 * std::min(a_max, b_max));
 }
 
 // One probe, any point of the limb (issue 16): on config/scenes/cobot.yaml forearm_b is forearm_a turned

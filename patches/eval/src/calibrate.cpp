@@ -10,6 +10,7 @@
 #include "ruffini/decode/network_decoder.h"
 #include "ruffini/decode/pipeline.h"
 #include "ruffini/error.h"
+#include "ruffini/eval/evaluation.h"
 #include "ruffini/eval/prepared.h"
 #include "ruffini/eval/stream.h"
 #include "ruffini/patch/geometry.h"
@@ -405,6 +406,38 @@ void ApplyGains(v1::DecoderModel& m, const std::vector<float>& g) {
     // up to the norm's change, which the floor absorbs; RAW nets fold exactly.
     fold(l.mutable_input());
   }
+}
+
+std::vector<std::int32_t> IndentationsAfter(const dataset::Dataset& d, int indentations, std::size_t max_ids) {
+  std::vector<std::int32_t> out;
+  if (indentations <= 0) return out;  // calibrated on everything
+  int seen = 0;
+  std::int32_t current = -1;
+  for (std::size_t k = 0; k < d.size() && out.size() < max_ids; ++k) {
+    const std::int32_t id = d.indentation[k];
+    if (id < 0 || id == current) continue;
+    current = id;
+    if (seen < indentations) {
+      ++seen;
+    } else if (std::find(out.begin(), out.end(), id) == out.end()) {
+      out.push_back(id);
+    }
+  }
+  return out;
+}
+
+v1::CastScore ScoreIndentations(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d,
+                                const std::vector<std::int32_t>& ids) {
+  if (ids.empty()) throw InputError("scoring a cast: no indentations to score");
+  const Prepared p = PrepareFrames(d, decode::BaselineFor(model, d.info.sample_rate_hz));
+  NetworkFrameDecoder<float> dec(model);
+  const Predictions pred = RunDecoder(dec, p, ids, {}, /*test_only=*/true);
+  const Evaluation ev = Evaluate(p, pred, spec);
+  v1::CastScore s;
+  s.set_indentations(static_cast<std::uint32_t>(ids.size()));
+  s.set_force_error_mn(ev.force_error_mn.median);
+  s.set_location_error_mm(ev.location_error_mm.median);
+  return s;
 }
 
 GainFit FitGains(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d, int sweeps,

@@ -153,10 +153,11 @@ ScriptedSource::ScriptedSource(const twin::Scene& scene, Scenario scenario, doub
     loads_.push_back(ProbeLoads(scene, mounts_.get(), p.patch, p.y_mm, p.r_deg, a));
   }
   if (scene.effects.viscoelastic) {
-    for (std::size_t i = 0; i < scene.patches.size(); ++i) {
-      sites_.emplace_back(&*scene.effects.viscoelastic, 1.0 / rate_hz_, probe_);
+    for (std::size_t i = 0; i < scenario_.presses.size(); ++i) {
+      for (const PatchLoad& l : loads_[i]) {
+        filters_.push_back({i, l.patch, {l.y_mm, l.r_deg}, l.share, twin::ViscoelasticFilter(*scene.effects.viscoelastic, 1.0 / rate_hz_)});
+      }
     }
-    current_press_.assign(scene.patches.size(), std::numeric_limits<std::size_t>::max());
   }
 }
 
@@ -168,32 +169,15 @@ void ScriptedSource::Sample(std::uint64_t sample, std::span<Wavelengths> out) {
   for (std::size_t c = 0; c < twins_.size() && c < out.size(); ++c) {
     twin::Shifts s{};
     std::uint32_t flags = 0;
-    if (!sites_.empty()) {
-      // One probe per patch: the latest press that has started drives the filter.
-      std::size_t latest = std::numeric_limits<std::size_t>::max();
-      const PatchLoad* load = nullptr;
-      for (std::size_t i = 0; i < scenario_.presses.size(); ++i) {
-        const auto& p = scenario_.presses[i];
-        const PatchLoad* on_c = nullptr;
-        for (const auto& l : loads_[i]) {
-          if (l.patch == c) on_c = &l;
-        }
-        if (on_c != nullptr && p.t_s <= t &&
-            (latest == std::numeric_limits<std::size_t>::max() || p.t_s >= scenario_.presses[latest].t_s)) {
-          latest = i;
-          load = on_c;
-        }
+    contacts_.clear();
+    if (!filters_.empty()) {
+      // Each press's filter steps once per sample, loaded or not (its residual fades where it pressed).
+      for (PressFilter& f : filters_) {
+        if (f.patch != c) continue;
+        const double eff = f.filter.Step(f.share * scenario_.presses[f.press].ForceAt(t));
+        if (eff > 0.0) contacts_.push_back(twin::Contact{f.at, eff, probe_});
       }
-      double f = 0.0;
-      if (latest != std::numeric_limits<std::size_t>::max()) {
-        const auto& p = scenario_.presses[latest];
-        if (latest != current_press_[c]) sites_[c].MoveTo({load->y_mm, load->r_deg});
-        f = load->share * p.ForceAt(t);
-      }
-      current_press_[c] = latest;
-      twins_[c]->StrainShiftsPm(sites_[c].Step(f), s, flags);
     } else {
-      contacts_.clear();
       for (std::size_t i = 0; i < scenario_.presses.size(); ++i) {
         const auto& p = scenario_.presses[i];
         for (const auto& l : loads_[i]) {
@@ -202,8 +186,8 @@ void ScriptedSource::Sample(std::uint64_t sample, std::span<Wavelengths> out) {
           if (f > 0.0) contacts_.push_back(twin::Contact{{l.y_mm, l.r_deg}, f, probe_});
         }
       }
-      twins_[c]->StrainShiftsPm(contacts_, s, flags);
     }
+    twins_[c]->StrainShiftsPm(contacts_, s, flags);
     sims_[c]->Read(t_abs, s, out[c], flags);
     for (const Offset& o : scenario_.offsets) {
       if (o.patch == c && t >= o.t_s && std::isfinite(out[c][o.grating])) out[c][o.grating] += o.pm * 1e-3;

@@ -19,6 +19,7 @@
 #include <thread>
 #include <vector>
 
+#include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
 #include "ruffini/patch/spec_loader.h"
 #include "ruffini/plot/svg.h"
@@ -28,6 +29,7 @@
 #include "ruffini/service/child.h"
 #include "ruffini/service/common.h"
 #include "ruffini/service/tls.h"
+#include "ruffini/twin/scene.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "run_common.h"
 
@@ -164,6 +166,72 @@ class Observer {
   std::atomic<bool> safety_ended_{false};
 };
 
+// The aggregator's view of each patch (GetStatus every 100 ms): when each was healthy. A patch that is not
+// healthy (no stream, silent, a fault in force, its baseline still being captured) holds the safety state in
+// FAULT. Not more often: a status carries every patch's sensitivity maps (about 50 kB on the cobot), and the
+// demo shares the machine with the processes it checks.
+class HealthPoller {
+ public:
+  struct Sample {
+    std::int64_t t_ns = 0;
+    std::vector<bool> healthy;  // per patch, in the order given
+  };
+  HealthPoller(Observer& observer, const std::vector<std::string>& patches)
+      : thread_([this, &observer, patches] {
+          while (!stop_) {
+            const auto st = observer.Status();
+            Sample s;
+            s.t_ns = service::UnixNowNs();
+            s.healthy.assign(patches.size(), false);
+            int found = 0;
+            for (const auto& ps : st.patches()) {
+              const auto it = std::find(patches.begin(), patches.end(), ps.patch_id());
+              if (it == patches.end()) continue;
+              s.healthy[static_cast<std::size_t>(it - patches.begin())] = ps.link_state() == v1::LINK_STATE_HEALTHY;
+              ++found;
+            }
+            if (found == static_cast<int>(patches.size())) {  // an unanswered poll says nothing
+              std::lock_guard lock(mu_);
+              samples_.push_back(std::move(s));
+            }
+            std::this_thread::sleep_for(100ms);
+          }
+        }) {}
+  ~HealthPoller() { Stop(); }
+  void Stop() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  std::vector<Sample> Samples() {
+    std::lock_guard lock(mu_);
+    return samples_;
+  }
+  // The first sample at or after `from_ns` in which `patch` (an index) was healthy; 0 when none.
+  std::int64_t FirstHealthy(std::size_t patch, std::int64_t from_ns) {
+    std::lock_guard lock(mu_);
+    for (const auto& s : samples_) {
+      if (s.t_ns >= from_ns && s.healthy[patch]) return s.t_ns;
+    }
+    return 0;
+  }
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::mutex mu_;
+  std::vector<Sample> samples_;
+  std::thread thread_;
+};
+
+// Windows of time [from, to) in which a scripted cause of FAULT was present.
+struct CauseWindow {
+  std::int64_t from_ns = 0, to_ns = 0;
+};
+bool InAny(const std::vector<CauseWindow>& w, std::int64_t t_ns) {
+  return std::any_of(w.begin(), w.end(), [t_ns](const CauseWindow& c) { return t_ns >= c.from_ns && t_ns < c.to_ns; });
+}
+// Gaps between safety states longer than this are not counted (the stream said nothing then).
+constexpr std::int64_t kMaxGapNs = 100'000'000;
+
 struct Event {
   std::string name, expected;
   double t_s = 0;  // when it was checked, s after the sim started
@@ -215,6 +283,9 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   if (grpc_port == 0) throw InputError("ruffini-aggregator did not start: " + aggregator.stderr_text());
   const std::string address = "127.0.0.1:" + std::to_string(grpc_port);
   Observer observer(address, service::ChannelCredentials(tls));
+  HealthPoller health(observer, patches);
+  // When the scripted causes of FAULT began and ended (Unix ns), for the time in FAULT per patch.
+  std::int64_t killed_ns = 0, restarted_ns = 0, frozen_ns = 0, thawed_ns = 0;
   log("aggregator on " + address + "; starting ruffini-controller (joint states at " + rate + " Hz)");
   Child controller({exe("ruffini-controller"), transport, "--robot", scene.name, "--aggregator", address, "--rate-hz", rate},
                    (run / "controller").string());
@@ -352,6 +423,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     sleep_until(std::max(t_s(), 10.5));
     Event e{"decoder " + killed_patch + " killed (SIGKILL)", "FAULT within 50 ms", 0, false, ""};
     const std::int64_t killed_at = service::UnixNowNs();
+    killed_ns = killed_at;
     decoders[killed_patch]->Signal(SIGKILL);
     std::optional<SafetyRecord> fault;
     WaitUntil([&] {
@@ -370,6 +442,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   }
   // 6. It restarts: healthy again, then a reset clears.
   {
+    restarted_ns = service::UnixNowNs();
     start_decoder(killed_patch);
     Event e{"decoder " + killed_patch + " restarted", "healthy again; CLEAR after a reset", 0, false, ""};
     const bool healthy = WaitUntil(all_healthy, 10s, 50ms);
@@ -383,6 +456,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   {
     Event e{"joint states stop (controller frozen)", "FAULT (joint states stale) within 100 ms", 0, false, ""};
     const std::int64_t frozen_at = service::UnixNowNs();
+    frozen_ns = frozen_at;
     controller.Signal(SIGSTOP);
     std::optional<SafetyRecord> fault;
     WaitUntil([&] {
@@ -399,6 +473,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     }
     std::this_thread::sleep_for(300ms);  // the controller stays frozen a moment, as a real stall would
     controller.Signal(SIGCONT);
+    thawed_ns = service::UnixNowNs();
     record(e);
   }
   // 8. Joint states back: a reset clears.
@@ -524,6 +599,9 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
               });
 
   // --- Shut down: everything by pid; the aggregator last (its subscribers get FAULT, then the stream ends).
+  // The time in FAULT is counted up to here: the shutdown's FAULT is the last event's.
+  const std::int64_t stop_ns = service::UnixNowNs();
+  health.Stop();
   log("stopping: controller, decoders, sim, aggregator");
   const int controller_exit = controller.Stop();
   for (auto& [name, d] : decoders) d->Stop(std::chrono::milliseconds(3000));
@@ -709,6 +787,199 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
       record(e);
     }
   }
+  // --- Patches: cast, model, calibration, time in FAULT -----------------------------------------------------
+  std::string patch_section;
+  {
+    const twin::Scene twin_scene = twin::LoadScene(o.scene_path);
+    const auto samples = health.Samples();
+    // Scripted causes present, per patch: the start-up (until its first healthy report) and, for the killed
+    // patch, from the kill until it is healthy again after its restart (the new decoder's baseline capture).
+    std::vector<std::vector<CauseWindow>> causes(patches.size());
+    std::int64_t all_healthy_ns = 0;
+    for (const auto& smp : samples) {
+      if (std::all_of(smp.healthy.begin(), smp.healthy.end(), [](bool h) { return h; })) {
+        all_healthy_ns = smp.t_ns;
+        break;
+      }
+    }
+    const std::int64_t first_ns = samples.empty() ? stop_ns : samples.front().t_ns;
+    for (std::size_t i = 0; i < patches.size(); ++i) {
+      const std::int64_t up = health.FirstHealthy(i, 0);
+      causes[i].push_back({first_ns, up > 0 ? up : stop_ns});
+      if (patches[i] == killed_patch && killed_ns > 0) {
+        const std::int64_t again = restarted_ns > 0 ? health.FirstHealthy(i, restarted_ns) : 0;
+        causes[i].push_back({killed_ns, again > 0 ? again : stop_ns});
+      }
+    }
+    // The safety state as a whole: also the frozen controller, until its joint states flow again.
+    std::vector<CauseWindow> state_causes{{first_ns, all_healthy_ns > 0 ? all_healthy_ns : stop_ns}};
+    for (std::size_t i = 0; i < patches.size(); ++i) {
+      if (causes[i].size() > 1) state_causes.push_back(causes[i][1]);
+    }
+    if (frozen_ns > 0) state_causes.push_back({frozen_ns, thawed_ns > 0 ? thawed_ns : stop_ns});
+    // The time in FAULT, on the safety stream (a state every 10 ms). A FAULT is on a patch's account when its
+    // cause names the patch or the aggregator reported the patch not healthy then (the latest poll). It had a present
+    // cause when a scripted cause was present at that moment or when its epoch latched (the latch holds it until
+    // the operator's reset); the start-up's FAULT always has one.
+    std::map<std::uint64_t, std::int64_t> latched_ns;
+    for (const auto& r : safety) latched_ns.emplace(r.state.stop_epoch(), r.arrival_ns);
+    std::vector<double> with_s(patches.size(), 0.0), without_s(patches.size(), 0.0);
+    // The stretches without a present cause, per patch: {start, end} in s after t0.
+    std::vector<std::vector<std::pair<double, double>>> stretches(patches.size());
+    double fault_with_s = 0, fault_without_s = 0, unobserved_s = 0;
+    std::map<std::uint64_t, std::string> uncaused_epochs;  // epoch -> its cause
+    std::size_t hp = 0;
+    // A contact latched while FAULT (a new epoch, the state stays FAULT) does not explain the FAULT: the last
+    // epoch with a fault's cause does.
+    std::optional<SafetyRecord> fault_epoch;
+    for (std::size_t k = 0; k + 1 < safety.size(); ++k) {
+      const auto& rec = safety[k];
+      if (rec.arrival_ns >= stop_ns) break;
+      if (rec.state.state() != v1::SafetyState::STATE_FAULT) {
+        fault_epoch.reset();
+        continue;
+      }
+      if (rec.state.cause().kind() != v1::SafetyCause::KIND_CONTACT || !fault_epoch) fault_epoch = rec;
+      const SafetyRecord& r = *fault_epoch;
+      const std::int64_t dt = std::min(safety[k + 1].arrival_ns, stop_ns) - rec.arrival_ns;
+      const std::int64_t counted_ns = std::min(dt, kMaxGapNs);
+      unobserved_s += static_cast<double>(dt - counted_ns) / 1e9;
+      const double counted = static_cast<double>(counted_ns) / 1e9;
+      const std::int64_t mid = rec.arrival_ns + counted_ns / 2;
+      const std::int64_t latched = latched_ns[r.state.stop_epoch()];
+      const bool startup = r.state.cause().kind() == v1::SafetyCause::KIND_STARTUP;
+      const bool state_caused = startup || InAny(state_causes, mid) || InAny(state_causes, latched);
+      (state_caused ? fault_with_s : fault_without_s) += counted;
+      if (!state_caused) uncaused_epochs.emplace(r.state.stop_epoch(), r.state.cause().message());
+      while (hp + 1 < samples.size() && samples[hp + 1].t_ns <= mid) ++hp;
+      for (std::size_t i = 0; i < patches.size(); ++i) {
+        const bool named = r.state.cause().patch_id() == patches[i];
+        const bool unhealthy = !samples.empty() && samples[hp].t_ns <= mid && !samples[hp].healthy[i];
+        if (!named && !unhealthy) continue;
+        const bool caused = startup || InAny(causes[i], mid) || (named && InAny(causes[i], latched));
+        (caused ? with_s : without_s)[i] += counted;
+        if (caused) continue;
+        const double from = rel(rec.arrival_ns), to = from + counted;
+        if (!stretches[i].empty() && std::abs(stretches[i].back().second - from) < 0.05) {
+          stretches[i].back().second = to;
+        } else {
+          stretches[i].push_back({from, to});
+        }
+      }
+    }
+    std::ostringstream m;
+    m << "\n## Patches: casts, models, time in FAULT\n\n"
+      << "Each patch's cast (the twin's skin sample), the model its decoder ran and what `ruffini calibrate` measured "
+         "when it made it (stored in the model file: the gain fit's objective, median force error mN + 10 x median "
+         "location error mm, on the presses it used; both models on later presses of the same recording, held out "
+         "from every fit), and how long the safety state was FAULT on the patch's account (its cause names the "
+         "patch, or the aggregator reported the patch not healthy, polled every 100 ms): with a present cause (a "
+         "scripted one present then or when the FAULT latched: the start-up and the patch's baseline capture; for "
+      << killed_patch
+      << ", its decoder killed until the restarted one is healthy) and without one (nothing scripted explains it: "
+         "a late wake-up, a decoder's own fault).\n\n"
+      << "| patch | cast | model | calibrated on | gain fit: objective before → after | held-out presses: median force "
+         "error before → after (mN), location error (mm) | thermal ratios | creep g (1 / 10 / 100 s) | FAULT with a "
+         "present cause (s) | FAULT without one (s) |\n"
+      << "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
+    for (std::size_t i = 0; i < patches.size(); ++i) {
+      const auto& sp = scene.patches[i];
+      std::string cast = "the scene's";
+      for (const auto& tp : twin_scene.patches) {
+        if (tp.name != sp.name) continue;
+        if (tp.cast_seed) {
+          cast = "skin sample " + std::to_string(*tp.cast_seed);
+        } else if (twin_scene.effects.skin_sample) {
+          cast = "skin sample " + std::to_string(twin_scene.effects.skin_sample->seed) + " (the scene's, every patch)";
+        }
+      }
+      std::string calibrated = "not calibrated to a cast", gains = "-", held = "-", ratios = "none (1)", creep = "none";
+      const v1::DecoderModel model = decode::LoadModel(sp.model_path);
+      if (model.has_cast_calibration() && model.cast_calibration().indentations() > 0) {
+        const auto& cc = model.cast_calibration();
+        calibrated = std::to_string(cc.indentations()) + " presses of `" + fs::path(cc.dataset()).filename().string() + "`" +
+                     (cc.start_model().empty() ? std::string() : ", from `" + fs::path(cc.start_model()).filename().string() + "`");
+        if (cc.objective_after() > 0) gains = Fmt("%.1f", cc.objective_before()) + " → " + Fmt("%.1f", cc.objective_after());
+        if (cc.has_held_out_after()) {
+          held = std::to_string(cc.held_out_after().indentations()) + " presses: " +
+                 Fmt("%.1f", cc.held_out_before().force_error_mn()) + " → " + Fmt("%.1f", cc.held_out_after().force_error_mn()) +
+                 " mN, " + Fmt("%.2f", cc.held_out_before().location_error_mm()) + " → " +
+                 Fmt("%.2f", cc.held_out_after().location_error_mm()) + " mm";
+        }
+      }
+      if (model.preprocessing().thermal_ratio_size() > 0) {
+        const auto& r = model.preprocessing().thermal_ratio();
+        ratios = Fmt("%.3f", *std::min_element(r.begin(), r.end())) + " to " + Fmt("%.3f", *std::max_element(r.begin(), r.end()));
+      }
+      if (model.has_creep() && model.creep().g_size() > 0) {
+        creep.clear();
+        for (int k = 0; k < model.creep().g_size(); ++k) creep += (k ? " / " : "") + Fmt("%.3f", model.creep().g(k));
+      }
+      m << "| " << sp.name << " | " << cast << " | `" << fs::path(sp.model_path).filename().string() << "` | " << calibrated
+        << " | " << gains << " | " << held << " | " << ratios << " | " << creep << " | " << Fmt("%.2f", with_s[i]) << " | "
+        << Fmt("%.2f", without_s[i]) << " |\n";
+      log("patch " + sp.name + ": FAULT " + Fmt("%.2f", with_s[i]) + " s with a present cause, " + Fmt("%.2f", without_s[i]) +
+          " s without one");
+    }
+    for (std::size_t i = 0; i < patches.size(); ++i) {
+      std::erase_if(stretches[i], [](const std::pair<double, double>& st) { return st.second - st.first < 0.005; });
+      if (stretches[i].empty()) continue;
+      m << "\n" << patches[i] << " in FAULT without a present cause:";
+      for (std::size_t k = 0; k < stretches[i].size() && k < 8; ++k) {
+        m << (k ? "," : "") << " " << Fmt("%.2f", stretches[i][k].first) << " to " << Fmt("%.2f", stretches[i][k].second);
+      }
+      if (stretches[i].size() > 8) m << " and " << stretches[i].size() - 8 << " more";
+      m << " s after the sim started (the event rows and `logs/` say why).\n";
+    }
+    m << "\nThe safety state was FAULT for " << Fmt("%.2f", fault_with_s + fault_without_s) << " s up to the shutdown: "
+      << Fmt("%.2f", fault_with_s) << " s with a present cause (also the frozen controller, from SIGSTOP to SIGCONT, "
+         "and the latch until the operator's reset) and "
+      << Fmt("%.2f", fault_without_s) << " s without one";
+    if (!uncaused_epochs.empty()) {
+      m << ":";
+      int shown = 0;
+      for (const auto& [epoch, cause] : uncaused_epochs) {
+        if (++shown > 5) break;
+        m << (shown > 1 ? ";" : "") << " epoch " << epoch << " (" << cause << ")";
+      }
+      if (uncaused_epochs.size() > 5) m << " and " << uncaused_epochs.size() - 5 << " more";
+    }
+    m << ".";
+    if (unobserved_s > 0) m << " Not observed (gaps over 100 ms between safety states): " << Fmt("%.2f", unobserved_s) << " s.";
+    m << "\n";
+    // What the field did over this run (the sim's clock starts at its sample 0, t0).
+    const double run_s = static_cast<double>(stop_ns - t0) / 1e9;
+    const auto& fx = twin_scene.effects;
+    m << "\nField conditions (`twin:` of the scene): ";
+    if (!fx.viscoelastic && !fx.temperature) m << "none (a lab scene).";
+    if (fx.viscoelastic) {
+      const double g = fx.viscoelastic->total_creep();
+      m << "a viscoelastic cover (creep " << Fmt("%.0f", 100.0 * g) << " % in all, " << fx.viscoelastic->terms.size()
+        << " terms); ";
+    }
+    if (fx.temperature) {
+      const auto& te = *fx.temperature;
+      double lo = te.AtC(0), hi = lo;
+      for (double t = 0; t <= run_s; t += 0.1) {
+        lo = std::min(lo, te.AtC(t));
+        hi = std::max(hi, te.AtC(t));
+      }
+      const double pm_per_c = te.coefficient_pm_per_c + te.strain_pm_per_c;
+      const double field = te.GradientScale(run_s);
+      m << "gratings at about " << Fmt("%.0f", pm_per_c) << " pm/°C; over the " << Fmt("%.0f", run_s)
+        << " s of this run the temperature moved within " << Fmt("%.2f", hi - lo) << " °C (about "
+        << Fmt("%.0f", (hi - lo) * pm_per_c) << " pm on every grating, the common mode the decoders remove)";
+      if (te.gradient_along_c != 0.0 || te.gradient_around_c != 0.0) {
+        m << ", and the field across each patch reached " << Fmt("%.0f", 100.0 * field) << " % of its size ("
+          << Fmt("%.2f", field * te.gradient_along_c) << " °C along, " << Fmt("%.2f", field * te.gradient_around_c)
+          << " °C around: up to " << Fmt("%.0f", field * std::max(te.gradient_along_c, te.gradient_around_c) * pm_per_c)
+          << " pm between gratings)";
+      }
+      m << ". A run of a minute sees little drift; the hour-long field recordings are docs/twin.md's.";
+    }
+    m << "\n";
+    patch_section = m.str();
+  }
   int passed = 0;
   for (const auto& e : events) passed += e.pass;
   std::ostringstream md;
@@ -740,7 +1011,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   for (const StopDelay& d : stop_delays) md << "| " << d.press << " | " << (std::isnan(d.ms) ? std::string("no STOP") : Fmt("%.0f", d.ms)) << " |\n";
   md << "\nWhere each patch is reliable, and at what force, is its sensitivity map (docs/coverage.md; the figures of "
         "the shipped maps are docs/coverage-report/PATCH-force.svg).\n"
-     << seam_section << "\n"
+     << seam_section << patch_section << "\n"
      << "## Figures\n\n"
      << "![forces](forces.svg)\n\n![safety](safety.svg)\n\n![positions](positions.svg)\n\n![latency](latency.svg)\n";
   const std::string report = (out / "report.md").string();

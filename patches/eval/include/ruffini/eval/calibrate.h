@@ -70,6 +70,16 @@ v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::Patch
 // median of 1. Throws InputError when the temperature hardly moved (common drift RMS under 3 pm).
 std::vector<float> FitThermalRatio(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data);
 
+// The ids of up to `max_ids` indentations after the first `indentations` (FirstIndentations' cut), in frame order:
+// the ones a calibration on the first `indentations` never saw. Empty when the data hold no more.
+std::vector<std::int32_t> IndentationsAfter(const dataset::Dataset& data, int indentations, std::size_t max_ids);
+
+// The model on the indentations `ids` of the data, as `ruffini evaluate` scores it (RunDecoder from a reset window
+// per indentation, Evaluate): median force error over their frames, median location error over their located
+// frames above 50 mN. Throws InputError when `ids` is empty.
+v1::CastScore ScoreIndentations(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data,
+                                const std::vector<std::int32_t>& ids);
+
 // Folds per-grating gains into every network's input normalisation: z = (g s - mean) / std.
 void ApplyGains(v1::DecoderModel& model, const std::vector<float>& gain);
 

@@ -112,8 +112,15 @@ class ScriptedSource final : public FrameSource {
   double rate_hz_;
   std::vector<std::unique_ptr<twin::SkinTwin>> twins_;
   std::vector<std::unique_ptr<twin::InterrogatorSim>> sims_;
-  std::vector<twin::ViscoelasticSites> sites_;     // one per patch when the scene is viscoelastic
-  std::vector<std::size_t> current_press_;         // per patch: index of the press the probe is at (or npos)
+  // A viscoelastic scene: one creep filter per press and patch it loads, so presses at once on one patch each
+  // creep, and each leaves its own residual where it was.
+  struct PressFilter {
+    std::size_t press = 0, patch = 0;
+    patch::SurfacePoint at;
+    double share = 0.0;
+    twin::ViscoelasticFilter filter;
+  };
+  std::vector<PressFilter> filters_;
   std::vector<twin::Contact> contacts_;
   std::unique_ptr<MountedScene> mounts_;
   std::vector<std::vector<PatchLoad>> loads_;     // per press
