@@ -278,7 +278,7 @@ void RegisterFieldHours(CLI::App& app) {
       Pool& p = pools[key];
       std::sort(p.delays.begin(), p.delays.end());
       r << "| " << key.first << " | `" << key.second << "` | " << F("%.1f", p.hours) << " | "
-        << F("%.2f", (p.rest + p.light_fired) / std::max(1e-9, p.hours)) << " | " << p.rest << " / " << p.light_fired
+        << F("%.2f", p.spurious / std::max(1e-9, p.hours)) << " | " << p.rest << " / " << p.light_fired
         << " of " << p.light << " | " << p.by_kind[0] << " / " << p.by_kind[2] << " / " << p.by_kind[3] << " / "
         << p.by_kind[1] << " / " << p.by_kind[4] << " | " << (p.due - p.due_stopped) << " of " << p.due << " / "
         << p.fault_only << " | " << F("%.0f", Quantile(p.delays, 0.5)) << " / " << F("%.0f", Quantile(p.delays, 0.99))

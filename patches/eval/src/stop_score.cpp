@@ -48,11 +48,6 @@ int StopScore::CountEpisodes(EpisodeCause c) const {
   return static_cast<int>(std::count_if(episodes.begin(), episodes.end(), [c](const StopEpisode& e) { return e.cause == c; }));
 }
 
-int StopScore::CountEpisodes(EpisodeCause c, EpisodeKind k) const {
-  return static_cast<int>(
-      std::count_if(episodes.begin(), episodes.end(), [c, k](const StopEpisode& e) { return e.cause == c && e.kind == k; }));
-}
-
 int StopScore::due_stopped() const {
   return static_cast<int>(std::count_if(due_presses.begin(), due_presses.end(), [](const DuePress& p) { return p.stopped; }));
 }
@@ -152,7 +147,7 @@ StopScore ScoreStops(const dataset::Dataset& d, const StreamPredictions& p, cons
       reject_run = 0;
       monitor_in_contact = true;
       reported[k] = p.force_n[k];
-      judge(k, p.force_n[k], p.force_sd_n[k], true, false, false);
+      judge(k, p.force_n[k], 0.0f, true, false, false);  // sent without an sd (link::Monitor::OnFrame)
       message = true;
     } else if (p.valid[k] != 0) {
       reject_run = 0;

@@ -89,7 +89,6 @@ struct StopScore {
   std::size_t pressed_frames = 0, unseen_frames = 0;       // true force > 100 mN; of them not reported in contact
 
   [[nodiscard]] int CountEpisodes(EpisodeCause c) const;
-  [[nodiscard]] int CountEpisodes(EpisodeCause c, EpisodeKind k) const;
   // Spurious STOPs as a user counts them: every episode that starts in a rest, and every light press in whose
   // window one or more episodes start (a press hovering about the threshold is one unneeded stop, not ten).
   [[nodiscard]] int spurious() const { return CountEpisodes(EpisodeCause::kRest) + light_stopped; }
