@@ -17,9 +17,24 @@ for g in 0.05 0.1 0.15 0.2 0.3; do
   $B field-hours --model $M/forearm-field.rmodel --scene $S/forearm-field.yaml --seeds 801-810 --gate-on-n $g \
     --retare --out "$OUT/val-gate$g"
 done
-# The next candidate (not shipped): faint contacts below 1 N refused.
+# Faint contacts below 1 N refused (the baseline held, its stale clock paused): on in forearm-field.rmodel and
+# forearm-embedded.rmodel since stop 27 (Preprocessing.faint_refuse_below_n), so "as shipped" above includes it;
+# here every model flag-only, then every model refusing (the lab model's file keeps it off).
 $B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
-  --seeds 801-810 --faint-refuse --out "$OUT/val-faint-refuse"
+  --seeds 801-810 --faint-refuse off --out "$OUT/val-faint-off"
+$B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
+  --seeds 801-810 --faint-refuse on --out "$OUT/val-faint-refuse"
+$B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
+  --scene $S/forearm-field-embedded.yaml --seeds 801-810 --faint-refuse off --out "$OUT/val-embedded-faint-off"
+$B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
+  --scene $S/forearm-field-embedded.yaml --seeds 801-810 --faint-refuse on --out "$OUT/val-embedded-faint-refuse"
+# The demo's four casts, each alone on the bench with its own model, flag-only and refusing (validation only).
+for p in forearm_a forearm_b upper_arm_a upper_arm_b; do
+  for f in off on; do
+    $B field-hours --model $M/cobot-field-$p.rmodel --scene $S/cobot-field.yaml --patch $p --seeds 801-805 \
+      --faint-refuse $f --out "$OUT/val-cobot-$p-faint-$f"
+  done
+done
 # The re-tare judge with and without the field separated: the operator under a temperature field (validation),
 # and the dry run (a re-tare judged every 10 s, never applied) on five validation hours of the field scene.
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml --seeds 801-810 --retare \

@@ -185,6 +185,29 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
     }
     // A stop rule that lowers a force (sd_k < 0) needs maps at the threshold plus the largest lowering.
     const double margin = std::max(0.0f, -config.stop_rule.sd_k) * config.stop_rule.max_sd_n;
+    // A decoder that refuses faint contacts below some force (Preprocessing.faint_refuse_below_n) must never
+    // refuse a frame the stop rule would stop on. The force alone (sd_k <= 0) stops above the threshold; a
+    // raising rule (sd_k > 0) stops down to the threshold less sd_k x the largest sd the model reports (its
+    // Uncertainty; without one every reading is a doubt and any force could stop).
+    for (std::size_t i = 0; i < scene.patches.size(); ++i) {
+      if (config.patches[i].region != r.name || !has_model[i]) continue;
+      const double below = models[i].preprocessing().faint_refuse_below_n();
+      if (!(below > 0.0)) continue;
+      double lowest_stop_n = r.threshold_n;
+      if (config.stop_rule.sd_k > 0.0f) {
+        const auto& sd = models[i].uncertainty().force_sd_n();
+        lowest_stop_n = sd.empty() ? 0.0
+                                   : r.threshold_n - config.stop_rule.sd_k * *std::max_element(sd.begin(), sd.end());
+      }
+      if (below > lowest_stop_n) {
+        refusal += std::string(refusal.empty() ? "" : "; ") + "patch " + scene.patches[i].name + "'s model " +
+                   scene.patches[i].model_path + " refuses faint contacts below " + Num(below) + " N, but region '" +
+                   r.name + "' (threshold " + Num(r.threshold_n) + " N, stop rule sd_k " + Num(config.stop_rule.sd_k) +
+                   ") may stop on a force of " + Num(std::max(0.0, lowest_stop_n)) +
+                   " N: a refused frame could be a stop (raise the threshold, or calibrate the model with a lower "
+                   "--faint-refuse-below-n)";
+      }
+    }
     decode::RegionGuarantee g = decode::GuaranteeRegion(patches, bands, r.threshold_n, cov.press_factor, margin);
     v1::RegionCoverage rc;
     rc.set_region(r.name);

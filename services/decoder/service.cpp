@@ -769,7 +769,11 @@ std::string DecoderService::Describe() const {
          " (sha256 " + s.model_sha256.substr(0, 12) + "), decoder " + s.choice.name + ", " +
          std::to_string(static_cast<int>(s.config.rate_hz)) + " Hz, heartbeat " +
          std::to_string(static_cast<double>(s.monitor_config.heartbeat_period_ns) / 1e6) + " ms, silence deadline " +
-         std::to_string(static_cast<double>(s.monitor_config.silence_deadline_ns) / 1e6) + " ms, interrogator " +
+         std::to_string(static_cast<double>(s.monitor_config.silence_deadline_ns) / 1e6) + " ms, " +
+         (s.model.preprocessing().faint_refuse_below_n() > 0
+              ? "faint contacts below " + std::to_string(s.model.preprocessing().faint_refuse_below_n()) + " N refused"
+              : std::string("faint contacts flagged")) +
+         " (the model's), interrogator " +
          s.config.interrogator.str() + ", aggregator " + s.config.aggregator.str();
 }
 

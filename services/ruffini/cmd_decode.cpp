@@ -161,7 +161,7 @@ void RegisterEvaluate(CLI::App& app) {
     double quiet_pm = decode::PipelineConfig{}.quiet_release_pm;
     double quiet_drop = decode::PipelineConfig{}.quiet_release_drop;
     double faint_pm = decode::PipelineConfig{}.faint_pm;
-    bool faint_refuse = decode::PipelineConfig{}.faint_refuse;
+    std::string faint_refuse = "model";
     decode::BaselineConfig field;
     std::string thermal_field = "model";
   };
@@ -187,8 +187,8 @@ void RegisterEvaluate(CLI::App& app) {
   cmd->add_option("--faint-pm", a->faint_pm,
                   "Flag a contact frame whose largest smoothed shift is below this (pm; 0: off; docs/decoders.md)")
       ->check(CLI::Range(0.0, 100.0))->capture_default_str();
-  cmd->add_flag("--faint-refuse,!--no-faint-refuse", a->faint_refuse,
-                "A faint frame below faint_max_n is no contact, and the baseline keeps tracking")->capture_default_str();
+  cmd->add_option("--faint-refuse", a->faint_refuse, kFaintRefuseHelp)
+      ->check(CLI::IsMember({"model", "on", "off"}))->capture_default_str();
   cmd->add_option("--thermal-field", a->thermal_field,
                   "The baseline follows a thermal field across the patch: as the model says, on or off (docs/decoders.md)")
       ->check(CLI::IsMember({"model", "on", "off"}))->capture_default_str();
@@ -223,7 +223,7 @@ void RegisterEvaluate(CLI::App& app) {
     pcfg.quiet_release_pm = a->quiet_pm;
     pcfg.quiet_release_drop = a->quiet_drop;
     pcfg.faint_pm = a->faint_pm;
-    pcfg.faint_refuse = a->faint_refuse;
+    pcfg.faint_refuse = ModelOnOff(a->faint_refuse);
     pcfg.baseline = a->field;
     const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", pcfg, a->thermal_field);
     const auto mask = eval::MaskOfIndentations(d, test);
@@ -374,6 +374,7 @@ void RegisterCalibrate(CLI::App& app) {
     bool uncertainty_only = false;
     int sweeps = 3;
     std::string thermal_field = "keep";
+    std::optional<double> faint_refuse_below_n;
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -395,9 +396,13 @@ void RegisterCalibrate(CLI::App& app) {
                   "The decoder's baseline follows a thermal field across the patch (a cast whose cover sees gradients; "
                   "docs/decoders.md): keep the model's choice, on or off")
       ->check(CLI::IsMember({"keep", "on", "off"}))->capture_default_str();
+  cmd->add_option("--faint-refuse-below-n", a->faint_refuse_below_n,
+                  "A cast whose baseline errors latch in the field: faint contact frames below this force are no contact "
+                  "(Preprocessing.faint_refuse_below_n; 0: off; default: keep the model's; docs/decoders.md \"Faint frames\")")
+      ->check(CLI::Range(0.0, 10.0));
   cmd->add_option("--sweeps", a->sweeps, "Coordinate sweeps of the gain fit")->check(CLI::Range(1, 20))->capture_default_str();
   cmd->add_flag("--uncertainty-only", a->uncertainty_only,
-                "Refit only the calibrated uncertainty (and --thermal-field): networks, gains, input range, thermal ratios, "
+                "Refit only the calibrated uncertainty (and --thermal-field, --faint-refuse-below-n): networks, gains, input range, thermal ratios, "
                 "creep, sensitivity and response maps stay as they are in --model");
   cmd->add_option("--patch-spec", a->patch_spec, "Patch spec")->capture_default_str();
   cmd->callback([a]() {
@@ -423,6 +428,7 @@ void RegisterCalibrate(CLI::App& app) {
     };
     // The switch is set first, so everything fitted below sees the decoder's baseline as it will run.
     if (a->thermal_field != "keep") m.mutable_preprocessing()->set_thermal_field(a->thermal_field == "on");
+    if (a->faint_refuse_below_n) m.mutable_preprocessing()->set_faint_refuse_below_n(static_cast<float>(*a->faint_refuse_below_n));
     if (a->uncertainty_only) {
       *m.mutable_uncertainty() = eval::FitUncertainty(m, md.spec, cal);
       decode::ValidateModel(m, a->out);

@@ -130,7 +130,8 @@ void RegisterFieldHours(CLI::App& app) {
     std::string thermal_field = "model";
     bool retare = false, retare_field = false;
     double gate_on_n = 0;  // 0: the model's
-    bool faint_refuse = false;
+    std::string faint_refuse = "model";
+    std::string patch;
     double retare_every_s = 10.0;
     double retare_level_n = decode::RetareConfig{}.min_force_n;
   };
@@ -157,8 +158,10 @@ void RegisterFieldHours(CLI::App& app) {
                   "Experiment: the force gate's on level for every model (off at 0.8 x on, as trained); 0: each model's")
       ->check(CLI::Range(0.0, 2.0))
       ->capture_default_str();
-  cmd->add_flag("--faint-refuse", a->faint_refuse,
-                "Experiment: PipelineConfig::faint_refuse (no contact below 1 N on shifts a baseline error gives too)");
+  cmd->add_option("--patch", a->patch,
+                  "The patch of a many-patch scene to run alone, on the bench, with its own cast (default: the scene's only one)");
+  cmd->add_option("--faint-refuse", a->faint_refuse, kFaintRefuseHelp)
+      ->check(CLI::IsMember({"model", "on", "off"}))->capture_default_str();
   cmd->add_flag("--retare", a->retare,
                 "The operator re-tares a stale patch (RetarePatch, judged against the model's response map) when it "
                 "goes stale and every --retare-every-s while it stays so (docs/experiments/retare.md)");
@@ -188,9 +191,9 @@ void RegisterFieldHours(CLI::App& app) {
     std::uint64_t done = 0;
     for (const auto& scene_path : a->scenes) {
       const twin::Scene scene = twin::LoadScene(scene_path);
-      if (scene.patches.size() != 1) throw InputError(scene_path + ": a field-hours scene has one patch; it has " + std::to_string(scene.patches.size()));
-      const twin::ScenePatch& patch = scene.Patch();
-      const twin::SkinTwin twin(patch.spec, scene.EffectsOf(0), {scene.probe.radius_mm});
+      const twin::ScenePatch& patch = scene.Patch(a->patch);  // throws when unknown, or when none is named of many
+      const twin::SkinTwin twin(patch.spec, scene.EffectsOf(static_cast<std::size_t>(&patch - scene.patches.data())),
+                                {scene.probe.radius_mm});
       for (const auto& [label, m] : models) decode::CheckModelMatchesPatch(m, patch.spec, label);
       const std::string scene_name = std::filesystem::path(scene_path).stem().string();
       for (const std::uint64_t seed : seeds) {
@@ -208,7 +211,7 @@ void RegisterFieldHours(CLI::App& app) {
           decode::PipelineConfig cfg;
           cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
           if (a->thermal_field != "model") cfg.baseline.thermal_field = a->thermal_field == "on";
-          cfg.faint_refuse = a->faint_refuse;
+          cfg.faint_refuse = ModelOnOff(a->faint_refuse);
           const decode::Pipeline<float> pipe(m, patch.spec, cfg);
           eval::OperatorRetare op;
           op.map = m.has_response() ? &m.response() : nullptr;
@@ -230,12 +233,13 @@ void RegisterFieldHours(CLI::App& app) {
       << "Reproduce: `ruffini field-hours";
     for (const auto& m : a->models) r << " --model " << m;
     for (const auto& s : a->scenes) r << " --scene " << s;
+    if (!a->patch.empty()) r << " --patch " << a->patch;
     r << " --seeds " << a->seeds << " --duration-s " << a->duration_s << " --rate-hz " << a->rate_hz << " --threshold-n "
       << rule.threshold_n;
     if (rule.sd_k != 0) r << " --sd-k " << rule.sd_k;
     if (a->thermal_field != "model") r << " --thermal-field " << a->thermal_field;
     if (a->gate_on_n > 0) r << " --gate-on-n " << a->gate_on_n;
-    if (a->faint_refuse) r << " --faint-refuse";
+    if (a->faint_refuse != "model") r << " --faint-refuse " << a->faint_refuse;
     if (a->retare) r << " --retare --retare-every-s " << a->retare_every_s << " --retare-level-n " << a->retare_level_n;
     if (a->retare && a->retare_field) r << " --retare-field";
     r << " --out " << a->out << "`\n\n"

@@ -53,6 +53,7 @@ void RegisterProbeCommand(CLI::App& app) {
     unsigned seed = 1;
     std::vector<double> offsets{-2.0, -1.0, -0.5, 0.5, 1.0, 2.0};
     decode::PipelineConfig pc;
+    std::string faint_refuse = "model";
   };
   auto a = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -77,9 +78,9 @@ void RegisterProbeCommand(CLI::App& app) {
   cmd->add_option("--seed", a->seed, "Noise seed")->capture_default_str();
   cmd->add_option("--faint-pm", a->pc.faint_pm, "PipelineConfig::faint_pm (0: off, the decoder before it)")
       ->check(CLI::Range(0.0, 100.0))->capture_default_str();
-  cmd->add_flag("--faint-refuse,!--no-faint-refuse", a->pc.faint_refuse,
-                "Faint frames below --faint-max-n are no contact (PipelineConfig::faint_refuse)")->capture_default_str();
-  cmd->add_option("--faint-max-n", a->pc.faint_max_n, "With --faint-refuse: faint frames below this force are no contact")
+  cmd->add_option("--faint-refuse", a->faint_refuse, kFaintRefuseHelp)
+      ->check(CLI::IsMember({"model", "on", "off"}))->capture_default_str();
+  cmd->add_option("--faint-max-n", a->pc.faint_max_n, "With --faint-refuse on: faint frames below this force are no contact")
       ->check(CLI::Range(0.0, 1e3))->capture_default_str();
   cmd->add_option("--data", a->data,
                   "Also decode this recording (twin data with true forces) and table the share of its contact frames "
@@ -94,8 +95,10 @@ void RegisterProbeCommand(CLI::App& app) {
     const v1::DecoderModel m = decode::LoadModel(a->model);
     decode::CheckModelMatchesPatch(m, spec, a->model);
     decode::PipelineConfig cfg = a->pc;
+    cfg.faint_refuse = ModelOnOff(a->faint_refuse);
     cfg.baseline = decode::BaselineFor(m, a->rate_hz);
     const decode::Pipeline<float> pipe(m, spec, cfg);
+    cfg = pipe.config();  // the model's choices resolved
     const int capture = cfg.baseline.capture_frames;
     const int settle = static_cast<int>(std::lround(a->settle_s * a->rate_hz));
     const int hold = static_cast<int>(std::lround(a->hold_s * a->rate_hz));
@@ -144,7 +147,7 @@ void RegisterProbeCommand(CLI::App& app) {
        << " streams per case (1 s capture, " << a->settle_s << " s quiet, offset held " << a->hold_s << " s), scored "
        << a->from_s << "-" << a->to_s << " s into the offset; faint rule "
        << (cfg.faint_pm > 0 ? "below " + Fmt(cfg.faint_pm) + " pm smoothed over " + Fmt(cfg.faint_smooth_s) + " s" +
-                                  (cfg.faint_refuse ? ", refused under " + Fmt(cfg.faint_max_n) + " N" : std::string(", flag only"))
+                                  (cfg.faint_refuse.value_or(false) ? ", refused under " + Fmt(cfg.faint_max_n) + " N" : std::string(", flag only"))
                             : std::string("off"))
        << ". Reported force: force_n on frames in contact, else 0. Contact frames at rest before the offsets: "
        << rest_contact << " of " << rest_frames << " (flagged: " << rest_flagged << ").\n\n";
@@ -186,7 +189,7 @@ void RegisterProbeCommand(CLI::App& app) {
        << " N, or flagged) in **" << fail << "** (largest " << buf << " N).\n";
     if (!a->data.empty()) {
       // The flag on a recording: per true-force bin, the contact frames and the share flagged faint (and, with
-      // --faint-refuse, refused: those are counted as flagged and not in contact).
+      // faint frames refused: those are counted as flagged and not in contact).
       const dataset::Dataset data = dataset::ReadDataset(a->data);
       if (data.info.patch_name != m.patch_name()) throw InputError(a->data + ": not a recording of the model's patch");
       decode::PipelineConfig rc = cfg;
@@ -212,7 +215,7 @@ void RegisterProbeCommand(CLI::App& app) {
             "flagged `faint` among the frames in contact or flagged:\n\n| true force (N) | frames | in contact | flagged |\n"
             "|---|---|---|---|\n";
       for (std::size_t b = 0; b + 1 < edges.size(); ++b) {
-        const long seen = contact[b] + (cfg.faint_refuse ? flagged[b] : 0);
+        const long seen = contact[b] + (cfg.faint_refuse.value_or(false) ? flagged[b] : 0);
         std::snprintf(buf, sizeof buf, "| %.2f - %s | %ld | %.2f %% | %.2f %% |\n", edges[b],
                       b + 2 < edges.size() ? Fmt(edges[b + 1]).c_str() : "...", frames[b],
                       frames[b] ? 100.0 * static_cast<double>(contact[b]) / static_cast<double>(frames[b]) : 0.0,

@@ -1,6 +1,8 @@
 #pragma once
 // Subcommands of the `ruffini` tool. Each Register* adds its subcommand to the app; the callback runs it.
 #include <CLI/CLI.hpp>
+#include <optional>
+#include <string>
 
 namespace ruffini::cli {
 
@@ -15,5 +17,15 @@ void RegisterSoakCommand(CLI::App& app);
 void RegisterCoverageCommands(CLI::App& app);
 void RegisterFieldHoursCommand(CLI::App& app);  // field-hours
 void RegisterProbeCommand(CLI::App& app);      // grating-probe  // sensitivity, check-scene
+
+// A model switch a command may override: "model" (unset: as the model file says), "on" or "off".
+inline std::optional<bool> ModelOnOff(const std::string& v) {
+  if (v == "on") return true;
+  if (v == "off") return false;
+  return std::nullopt;
+}
+inline constexpr const char* kFaintRefuseHelp =
+    "Faint contact frames below the model's force (or 1 N) are no contact and the baseline keeps tracking: as the model "
+    "says (Preprocessing.faint_refuse_below_n), on or off (docs/decoders.md \"Faint frames\")";
 
 }  // namespace ruffini::cli

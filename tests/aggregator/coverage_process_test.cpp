@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <string>
 
 #include "process.h"
@@ -46,12 +47,14 @@ v1::SensitivityMap Map() {
 
 // A folder with the model (the shipped networks, this test's map) and a one-patch scene; `coverage` is the
 // scene's safety.coverage section (empty: none).
-std::string MakeScene(const std::string& dir, const std::string& coverage) {
+std::string MakeScene(const std::string& dir, const std::string& coverage,
+                      const std::function<void(v1::DecoderModel&)>& edit = {}) {
   fs::remove_all(dir);
   fs::create_directories(dir);
   v1::DecoderModel model = ruffini::decode::LoadModel(kSrc + "/config/models/forearm.rmodel");
   model.clear_sensitivity();
   *model.add_sensitivity() = Map();
+  if (edit) edit(model);
   ruffini::decode::SaveModel(dir + "/mapped.rmodel", model);
   std::ifstream in(kSrc + "/tests/fault/one-patch.yaml");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -170,3 +173,41 @@ TEST(CoverageProcess, ABandBeyondItsPatchIsAClearError) {
 }
 
 }  // namespace
+
+// A model that refuses faint contacts below 1 N (Preprocessing.faint_refuse_below_n) must not sit under a stop
+// rule that could stop on less: with sd_k 3 and the model's largest sd 0.2 N, a 0.9 N reading stops at 1.5 N.
+// The aggregator refuses that scene and says why; with sd_k 1 (stops down to 1.3 N) it loads.
+TEST(CoverageProcess, AFaintRefusingModelUnderAStopRuleThatCouldStopBelowItIsRefused) {
+  const auto refusing = [](v1::DecoderModel& m) {
+    m.mutable_preprocessing()->set_faint_refuse_below_n(1.0f);
+    auto* u = m.mutable_uncertainty();
+    u->clear_force_knots_n();
+    u->clear_force_sd_n();
+    u->clear_position_scale();
+    for (auto [knot, sd] : {std::pair{0.1f, 0.1f}, {2.0f, 0.2f}}) {
+      u->add_force_knots_n(knot);
+      u->add_force_sd_n(sd);
+      u->add_position_scale(1.0f);
+    }
+  };
+  const auto rule = [](const char* k) {
+    return kBand + "  stop_rule:\n    sd_k: " + k + "\n    source: coverage_process_test\n";
+  };
+  const std::string dir = (fs::current_path() / "coverage_faint").string();
+  const std::string scene = MakeScene(dir, rule("3"), refusing);
+  rt::Process agg({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", scene, "--listen", "127.0.0.1:0", "--metrics",
+                   "127.0.0.1:0"},
+                  dir);
+  EXPECT_EQ(agg.WaitExit(10s), 1);
+  EXPECT_NE(agg.stderr_text().find("refuses faint contacts below 1.00 N, but region 'forearm' (threshold 1.50 N, stop "
+                                   "rule sd_k 3.00) may stop on a force of 0.90 N"),
+            std::string::npos)
+      << agg.stderr_text();
+  rt::Process check({RUFFINI_EXE, "check-scene", scene}, dir);
+  EXPECT_EQ(check.WaitExit(30s), 1) << check.stdout_text() << check.stderr_text();
+  const std::string dir1 = (fs::current_path() / "coverage_faint_ok").string();
+  rt::Process ok({RUFFINI_EXE, "check-scene", MakeScene(dir1, rule("1"), refusing)}, dir1);
+  EXPECT_EQ(ok.WaitExit(30s), 0) << ok.stdout_text() << ok.stderr_text();
+  rt::Process plain({RUFFINI_EXE, "check-scene", MakeScene(dir1, rule("3"))}, dir1);
+  EXPECT_EQ(plain.WaitExit(30s), 0) << "the flag-only model under the same rule\n" << plain.stdout_text() << plain.stderr_text();
+}

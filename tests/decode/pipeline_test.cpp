@@ -293,6 +293,29 @@ TEST(PipelineTest, MismatchedPreprocessingIsRefused) {
   }
 }
 
+// Preprocessing.faint_refuse_below_n is the model's choice: a pipeline left unset takes it (on, at the
+// model's force), an explicit setting overrides it, and a file outside 0..10 N is refused when loaded.
+TEST(PipelineTest, FaintRefusalIsTheModelsChoiceUnlessOverridden) {
+  auto m = testing::SyntheticModel(Spec());
+  PipelineConfig cfg;
+  cfg.baseline = BaselineFor(m, 100.0);
+  EXPECT_FALSE(*Pipeline<float>(m, Spec(), cfg).config().faint_refuse) << "older files: flag only";
+  m.mutable_preprocessing()->set_faint_refuse_below_n(0.8f);
+  const Pipeline<float> own(m, Spec(), cfg);
+  EXPECT_TRUE(*own.config().faint_refuse);
+  EXPECT_DOUBLE_EQ(own.config().faint_max_n, 0.8f);
+  cfg.faint_refuse = false;
+  EXPECT_FALSE(*Pipeline<float>(m, Spec(), cfg).config().faint_refuse);
+  cfg.faint_refuse = true;
+  EXPECT_DOUBLE_EQ(Pipeline<float>(m, Spec(), cfg).config().faint_max_n, PipelineConfig{}.faint_max_n)
+      << "an override uses the config's force";
+  EXPECT_NO_THROW(ValidateModel(m, "m"));
+  for (float bad : {-0.1f, 10.5f, std::numeric_limits<float>::quiet_NaN()}) {
+    m.mutable_preprocessing()->set_faint_refuse_below_n(bad);
+    EXPECT_THROW(ValidateModel(m, "m"), InputError) << bad;
+  }
+}
+
 TEST(PipelineTest, UncertaintyIsTheModelsCalibration) {
   auto m = testing::SyntheticModel(Spec());
   auto* u = m.mutable_uncertainty();

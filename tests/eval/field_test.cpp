@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <optional>
 #include <random>
 #include <utility>
 #include <vector>
@@ -54,8 +55,11 @@ const v1::DecoderModel& FieldModel() {
   return m;
 }
 
-StreamPredictions Decode(const dataset::Dataset& d, const v1::DecoderModel& m = Model()) {
+// faint_refuse unset: as the model says; false: every faint frame reported (flag only).
+StreamPredictions Decode(const dataset::Dataset& d, const v1::DecoderModel& m = Model(),
+                         std::optional<bool> faint_refuse = std::nullopt) {
   decode::PipelineConfig cfg;
+  cfg.faint_refuse = faint_refuse;
   cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
   const decode::Pipeline<float> pipe(m, PaperScene().Patch().spec, cfg);
   return DecodeStream(pipe, d);
@@ -145,7 +149,10 @@ struct Press {
   dataset::Dataset data;
   std::size_t hold_first = 0, hold_last = 0, rest_first = 0;
 };
-Press StaticPress(const twin::Scene& scene, const patch::SurfacePoint& at, double force_n, double hold_s) {
+// raise_to_n > 0: after the hold the force ramps to raise_to_n over 2 s and holds 5 s there (hold_last marks
+// the end of that second hold), then releases from it.
+Press StaticPress(const twin::Scene& scene, const patch::SurfacePoint& at, double force_n, double hold_s,
+                  double raise_to_n = 0.0) {
   const twin::SkinTwin t(scene.Patch().spec, scene.effects, {scene.probe.radius_mm});
   const double rate = 100.0, dt = 1.0 / rate;
   twin::InterrogatorSim sim(t, 5);
@@ -175,6 +182,11 @@ Press StaticPress(const twin::Scene& scene, const patch::SurfacePoint& at, doubl
   for (int k = 1; k <= 100; ++k) frame(force_n * k / 100);  // 1 s ramp
   out.hold_first = out.data.size();
   for (int k = 0; k < static_cast<int>(hold_s * rate); ++k) frame(force_n);
+  if (raise_to_n > 0.0) {
+    for (int k = 1; k <= 200; ++k) frame(force_n + (raise_to_n - force_n) * k / 200);
+    for (int k = 0; k < 500; ++k) frame(raise_to_n);
+    force_n = raise_to_n;
+  }
   out.hold_last = out.data.size();
   for (int k = 49; k >= 0; --k) frame(force_n * k / 50);    // 0.5 s release
   out.rest_first = out.data.size();
@@ -316,23 +328,34 @@ TEST(ShippedModelField, PressesAtAGratingAreNotFlaggedAndAtTheEdgeNotSuppressed)
 
 // faint_refuse (off by default) ends finding 1(a)'s latch: a grating left 1 pm low (a press absorbed, then
 // released) reads as a contact, the gate freezes the baseline and after 300 s it is stale for good. Refused,
-// the baseline keeps tracking and absorbs the error: no stale frame, and the phantom ends.
-TEST(ShippedModelField, RefusedFaintFramesLetTheBaselineAbsorbAPicometre) {
+// the baseline holds without its stale clock running: no stale frame. The offset is not absorbed (the
+// baseline does not track it), so the frames the networks read at 1 N or more (noise on the 0.57 N the
+// offset reads, or whose smoothed shifts noise lifts above the faint level) are still contacts.
+TEST(ShippedModelField, RefusedFaintFramesEndTheLatchOfAPicometre) {
   const auto wl = OneGratingOff(15, -1.0, 500, 500 + 40000, 7);
   decode::PipelineConfig off, refuse;
   off.faint_pm = 0.0;
   refuse.faint_refuse = true;
-  const Frames latched = DecodeFrames(FieldModel(), off, wl), tracked = DecodeFrames(FieldModel(), refuse, wl);
+  const Frames latched = DecodeFrames(FieldModel(), off, wl), held = DecodeFrames(FieldModel(), refuse, wl);
   const auto count = [](const std::vector<bool>& v, std::size_t from) {
     return static_cast<std::size_t>(std::count(v.begin() + static_cast<std::ptrdiff_t>(from), v.end(), true));
   };
   EXPECT_GT(count(latched.stale, 500), 1000u) << "the latch this test is about no longer happens without the rule";
-  EXPECT_EQ(count(tracked.stale, 500), 0u);
-  EXPECT_EQ(count(tracked.contact, 500 + 12000), 0u) << "contacts 2 min after the offset";
+  EXPECT_EQ(count(held.stale, 500), 0u);
+  std::size_t light = 0;
+  for (std::size_t k = 500; k < held.contact.size(); ++k) {
+    light += held.contact[k] && held.faint[k] && held.force[k] < refuse.faint_max_n;
+  }
+  EXPECT_EQ(light, 0u) << "faint contact frames below faint_max_n";
+  const std::size_t contacts = count(held.contact, 500);
+  std::printf("-1 pm on FBG 16 for 400 s, faint frames refused: %zu contact frames (read at 1 N or more, or not faint)\n", contacts);
+  EXPECT_LT(contacts, wl.size() / 20) << "most of the offset's frames are refused";
 }
 
 // The 120 s press through the field scene (viscoelastic cover, temperature history): the decoded
-// force at the end of the hold against the applied force, and phantom contacts after the release.
+// force at the end of the hold against the applied force, and phantom contacts after the release. Decoded
+// with every faint frame reported: the guard is about the baseline eating a press, and the field model's
+// refusal would report a faint light press as 0 (it holds the baseline: the raised-press test below).
 TEST(ShippedModelField, HundredTwentySecondPresses) {
   const twin::SkinTwin t(FieldScene().Patch().spec, FieldScene().effects, {5.5});
   const auto& a = t.spec().indented_area;
@@ -342,7 +365,7 @@ TEST(ShippedModelField, HundredTwentySecondPresses) {
                                          patch::SurfacePoint{0.5 * (a.y_min_mm + a.y_max_mm), 0.5 * (a.r_min_deg + a.r_max_deg)},
                                          BetweenGratings(t)}) {
       const Press press = StaticPress(FieldScene(), at, force, 120.0);
-      const auto p = Decode(press.data, FieldModel());
+      const auto p = Decode(press.data, FieldModel(), false);
       const double late = MeanForce(p, press.hold_last - 100, press.hold_last);
       std::size_t phantom = 0;
       for (std::size_t k = press.rest_first + 50; k < press.data.size(); ++k) phantom += p.in_contact[k] && p.force_n[k] > 0.05f;
@@ -441,6 +464,10 @@ TEST(OperatorRetare, RecoversAStaleBaselineAndRefusesWhileThePressIsOn) {
                                      [&](const twin::FrameSink& s) { return twin::RunField(t, FieldScene(), fp, 805, s); });
   decode::PipelineConfig cfg;
   cfg.baseline = decode::BaselineFor(FieldModel(), d.info.sample_rate_hz);
+  // This hour went stale through finding 1(a) (a faint baseline error held frozen), which the field model's
+  // faint refusal ends (ShippedModelField.RefusedFaintFramesEndTheLatchOfAPicometre); the re-tare must still
+  // recover a stale patch: flag only here.
+  cfg.faint_refuse = false;
   const decode::Pipeline<float> pipe(FieldModel(), FieldScene().Patch().spec, cfg);
   auto stale_s = [&](const StreamPredictions& p) {
     std::size_t n = 0;
@@ -461,5 +488,38 @@ TEST(OperatorRetare, RecoversAStaleBaselineAndRefusesWhileThePressIsOn) {
   EXPECT_EQ(op.accepted_while_pressed, 0);
 }
 
+}  // namespace
+}  // namespace ruffini::eval
+
+namespace ruffini::eval {
+namespace {
+// A light press held at a weak site, then raised to 1.5x the threshold (2.25 N), on the field model: the
+// raised press must read above the threshold at the end of its 5 s hold, faint frames refused or not. The
+// refusal's first version let the baseline track refused frames: it absorbed the light press and read the
+// raised one at 1.2 N (0.9 N held 120 s at (40 mm, 47.5 deg)), a STOP cleared under 2.25 N.
+TEST(ShippedModelField, AHeldLightPressRaisedToAStopIsReadAboveTheThresholdFaintFramesRefusedOrNot) {
+  const twin::SkinTwin t(FieldScene().Patch().spec, FieldScene().effects, {5.5});
+  const auto& a = t.spec().indented_area;
+  for (const patch::SurfacePoint at : {patch::SurfacePoint{a.y_min_mm + 25, a.r_min_deg + 20}, BetweenGratings(t)}) {
+    for (const double light : {0.5, 0.9}) {
+      const Press press = StaticPress(FieldScene(), at, light, 120.0, 2.25);
+      double late[2] = {0, 0};
+      std::size_t refused_frames = 0;
+      for (const bool refuse : {false, true}) {
+        decode::PipelineConfig cfg;
+        cfg.faint_refuse = refuse;
+        cfg.baseline = decode::BaselineFor(FieldModel(), 100.0);
+        const decode::Pipeline<float> pipe(FieldModel(), FieldScene().Patch().spec, cfg);
+        const auto p = DecodeStream(pipe, press.data);
+        late[refuse] = MeanForce(p, press.hold_last - 300, press.hold_last);
+        for (std::size_t k = press.hold_first; k < press.hold_last; ++k) refused_frames += refuse && !p.in_contact[k];
+        std::printf("(%.1f mm, %.1f deg) %.1f N held 120 s, raised to 2.25 N, faint refused %d: last 3 s %.3f N\n",
+                    at.y_mm, at.r_deg, light, refuse, late[refuse]);
+        EXPECT_GT(late[refuse], 1.5) << light << " N at " << at.y_mm << " mm, refuse " << refuse;
+      }
+      std::printf("  %zu frames of the light hold refused\n", refused_frames);
+    }
+  }
+}
 }  // namespace
 }  // namespace ruffini::eval

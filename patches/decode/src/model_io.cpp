@@ -155,6 +155,9 @@ void ValidateModel(const v1::DecoderModel& m, const std::string& where) {
         }
       }
     }
+    if (const float below = m.preprocessing().faint_refuse_below_n(); !(std::isfinite(below) && below >= 0.0f && below <= 10.0f)) {
+      throw InputError("preprocessing faint_refuse_below_n " + std::to_string(below) + " N outside 0..10 (0: off)");
+    }
     if (m.has_creep()) {
       const auto& c = m.creep();
       if (c.g_size() != c.tau_s_size() || c.g_size() > 4) {
