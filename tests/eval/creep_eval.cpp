@@ -167,15 +167,12 @@ void Regressions(const dataset::Dataset& d, const eval::StreamPredictions& p, co
   solve(ata, atb, 4, sse0, n, "FitCreep's rows, x terms + scale:");
   solve(ata_in, atb_in, 3, sse0_in, n_in, "press frames only, x terms only:");
   solve(ata_in, atb_in, 4, sse0_in, n_in, "press frames only, x terms + scale:");
-  const Eigen::Matrix3d c = ata.topLeftCorner(3, 3);
-  const Eigen::Vector3d dg = c.diagonal().cwiseSqrt().cwiseInverse();
   std::printf("  correlation of the columns x1, x10, x100, F (FitCreep's rows):\n");
   for (int i = 0; i < 4; ++i) {
     std::printf("   ");
     for (int j = 0; j < 4; ++j) std::printf(" %.3f", ata(i, j) / std::sqrt(ata(i, i) * ata(j, j)));
     std::printf("\n");
   }
-  (void)dg;
   std::printf("decoded force / the twin's strain force F + sum g x (g %.3f / %.3f / %.3f), press frames: %.4f\n",
               twin_g[0], twin_g[1], twin_g[2], fe_p / fe_fe);
 }
