@@ -444,23 +444,8 @@ void RegisterCalibrate(CLI::App& app) {
     const std::optional<v1::CastScore> before =
         held_out.empty() ? std::nullopt : std::optional(eval::ScoreIndentations(md.model, md.spec, md.data, held_out));
     v1::CastCalibration summary;
-    if (a->gains) {
-      const eval::GainFit g = eval::FitGains(m, md.spec, cal, a->sweeps, [](int s, int n, double obj) {
-        spdlog::info("gain fit: sweep {}/{}, objective {:.2f}", s, n, obj);
-      });
-      eval::ApplyGains(m, g.gain);
-      auto* cc = m.mutable_cast_calibration();
-      cc->clear_grating_gain();
-      for (float v : g.gain) cc->add_grating_gain(v);
-      std::printf("gains fitted: objective %.2f -> %.2f (%d evaluations)\n", g.before, g.after, g.evaluations);
-      summary.set_objective_before(g.before);
-      summary.set_objective_after(g.after);
-      if (a->creep_data.empty() && m.preprocessing().thermal_ratio_size() > 0) {
-        // Thermal ratios belong to a cast: another cast's would be wrong. Unit ratios until --field-data.
-        m.mutable_preprocessing()->clear_thermal_ratio();
-        spdlog::warn("thermal ratios cleared (another cast's); fit this cast's with --field-data");
-      }
-    }
+    // The cast's thermal ratios and creep first: the gains are fitted through the cast's own preprocessing, and
+    // against the strain force the creep compensation turns back into the applied force (FitGains).
     if (!a->creep_data.empty()) {
       const dataset::Dataset creep = dataset::ReadDataset(a->creep_data);
       if (creep.info.patch_name != m.patch_name()) throw InputError(a->creep_data + ": dataset is from patch '" + creep.info.patch_name + "'");
@@ -477,9 +462,25 @@ void RegisterCalibrate(CLI::App& app) {
       if (!a->creep) {
         m.clear_creep();
       } else {
-      *m.mutable_creep() = eval::FitCreep(m, md.spec, creep);
-      std::printf("creep compensation: g = %.4f / %.4f / %.4f at tau 1 / 10 / 100 s\n", m.creep().g(0), m.creep().g(1), m.creep().g(2));
+        *m.mutable_creep() = eval::FitCreep(m, md.spec, creep);
+        std::printf("creep compensation: g = %.4f / %.4f / %.4f at tau 1 / 10 / 100 s\n", m.creep().g(0), m.creep().g(1), m.creep().g(2));
       }
+    } else if (a->gains && m.preprocessing().thermal_ratio_size() > 0) {
+      // Thermal ratios belong to a cast: another cast's would be wrong. Unit ratios until --field-data.
+      m.mutable_preprocessing()->clear_thermal_ratio();
+      spdlog::warn("thermal ratios cleared (another cast's); fit this cast's with --field-data");
+    }
+    if (a->gains) {
+      const eval::GainFit g = eval::FitGains(m, md.spec, cal, a->sweeps, [](int s, int n, double obj) {
+        spdlog::info("gain fit: sweep {}/{}, objective {:.2f}", s, n, obj);
+      });
+      eval::ApplyGains(m, g.gain);
+      auto* cc = m.mutable_cast_calibration();
+      cc->clear_grating_gain();
+      for (float v : g.gain) cc->add_grating_gain(v);
+      std::printf("gains fitted: objective %.2f -> %.2f (%d evaluations)\n", g.before, g.after, g.evaluations);
+      summary.set_objective_before(g.before);
+      summary.set_objective_after(g.after);
     }
     *m.mutable_input_range() = eval::FitInputRange(m, md.spec, cal);
     *m.mutable_uncertainty() = eval::FitUncertainty(m, md.spec, cal);

@@ -446,6 +446,67 @@ TEST(Calibrate, ThermalRatiosRecoverTheCastsCoefficients) {
   EXPECT_THROW(FitThermalRatio(Model(), PaperScene().Patch().spec, still), InputError);
 }
 
+// ruffini calibrate's creep fit measures the cover, not the decoder's static scale (issue 17: on the four
+// field casts it came out 0 / 0 / 0, on cast 0 0.111 / 0.002 / 0.081). The same hour of the field scene (the
+// twin's cover: g 0.05 / 0.04 / 0.03 at 1 / 10 / 100 s) decoded by the field model as it is, 15 % low and 15 %
+// high (every grating's gain 0.85 or 1.15, as another cast or a gain fit leaves it). The fit without a scale
+// per press gave 0.028 / 0 / 0.104, 0 / 0 / 0 and 0.144 / 0 / 0.133: the scale error read as creep.
+TEST(Calibrate, TheCreepFitDoesNotDependOnTheDecodersScale) {
+  const twin::SkinTwin t(FieldScene().Patch().spec, FieldScene().effects, {5.5});
+  twin::FieldProtocol fp;
+  fp.duration_s = 3600.0;
+  const dataset::Dataset d = Collect(t, FieldScene(), "field", 21, fp.rate_hz,
+                                     [&](const twin::FrameSink& s) { return twin::RunField(t, FieldScene(), fp, 21, s); });
+  double truth = 0;
+  for (const auto& term : FieldScene().effects.viscoelastic->terms) truth += term.g;
+  std::vector<double> totals, fast;
+  for (const float gain : {1.0f, 0.85f, 1.15f}) {
+    v1::DecoderModel m = FieldModel();
+    ApplyGains(m, std::vector<float>(16, gain));
+    const v1::CreepCompensation c = FitCreep(m, FieldScene().Patch().spec, d);
+    ASSERT_EQ(c.g_size(), 3);
+    double total = 0;
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_GE(c.g(k), 0.0f);
+      total += c.g(k);
+    }
+    std::printf("gains %.2f: creep g %.4f / %.4f / %.4f (sum %.3f; the twin's %.3f)\n", gain, c.g(0), c.g(1), c.g(2), total, truth);
+    totals.push_back(total);
+    fast.push_back(c.g(0) + c.g(1));
+  }
+  for (std::size_t i = 0; i < totals.size(); ++i) {
+    // The creep of every decoder within a factor of two of the twin's, and the three fits' 1 s and 10 s terms
+    // alike (measured: 0.100-0.103 / 0.055-0.056 / 0.007-0.022, sum 0.165-0.177 against 0.12; the 100 s term
+    // is the least determined: a hold lasts at most 120 s and the baseline follows a residual that slow).
+    EXPECT_GT(totals[i], 0.5 * truth) << i;
+    EXPECT_LT(totals[i], 2.0 * truth) << i;
+    EXPECT_NEAR(fast[i], fast[0], 0.25 * fast[0]) << i;
+  }
+}
+
+// With a creep compensation in the model, the gains aim at the strain force F + sum g x the networks see
+// under a creeping cover (the decoder's compensation turns it back into F), not at F: fitted against F they
+// took the creep's mean rise into the cast's scale, and the compensation then took it off a second time.
+TEST(Calibrate, GainsAimAtTheStrainForceTheCreepCompensationUndoes) {
+  const dataset::Dataset d = PaperRun(FieldScene().effects, 40, 2);  // a creeping cover, validation seed
+  const auto mean_gain = [&](const v1::DecoderModel& m) {
+    const GainFit fit = FitGains(m, PaperScene().Patch().spec, d, 1);
+    double mean = 0;
+    for (const float g : fit.gain) mean += g / 16.0;
+    return mean;
+  };
+  v1::DecoderModel creeping = Model();
+  ASSERT_FALSE(creeping.has_creep());
+  const double plain = mean_gain(creeping);
+  for (const double tau : {1.0, 10.0, 100.0}) {
+    creeping.mutable_creep()->add_g(tau == 1.0 ? 0.3f : 0.0f);
+    creeping.mutable_creep()->add_tau_s(static_cast<float>(tau));
+  }
+  const double with_creep = mean_gain(creeping);
+  std::printf("mean gain: %.3f without creep, %.3f aiming at F + 0.3 x(1 s)\n", plain, with_creep);
+  EXPECT_GT(with_creep, plain + 0.05);
+}
+
 }  // namespace
 }  // namespace ruffini::eval
 

@@ -334,33 +334,10 @@ std::vector<float> FitThermalRatio(const v1::DecoderModel& model, const patch::P
   return out;
 }
 
-v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
-  v1::DecoderModel m = model;
-  m.clear_creep();
-  m.clear_input_range();
-  const decode::Pipeline<float> pipe(m, spec, OpenConfig(m, d));
-  const StreamPredictions p = DecodeStream(pipe, d);
-  const std::array<double, 3> tau = {1.0, 10.0, 100.0};
-  const double dt = 1.0 / d.info.sample_rate_hz;
-  std::array<double, 3> a{}, x{};
-  for (std::size_t k = 0; k < 3; ++k) a[k] = 1.0 - std::exp(-dt / tau[k]);
-  Eigen::Matrix3d ata = Eigen::Matrix3d::Zero();
-  Eigen::Vector3d atb = Eigen::Vector3d::Zero();
-  std::size_t used = 0, pressed = 0;
-  for (std::size_t k = 0; k < d.size(); ++k) {
-    const double ref = Reference(d, k);
-    const double f = std::isfinite(ref) ? std::max(0.0, ref) : 0.0;
-    for (std::size_t j = 0; j < 3; ++j) x[j] += a[j] * (f - x[j]);  // the twin's discretisation
-    if (!p.valid[k] || !std::isfinite(ref)) continue;
-    // F_strain = F (1 + sum g a) + sum g (1 - a) x_prev: regress on the post-update x (same span).
-    const Eigen::Vector3d row(x[0], x[1], x[2]);
-    ata += row * row.transpose();
-    atb += row * (p.force_n[k] - ref);
-    ++used;
-    pressed += ref > 0.05;
-  }
-  if (pressed < 1000) throw InputError("creep fit: the data hold too few pressed frames (" + std::to_string(pressed) + "); use a field recording");
-  // Non-negative least squares over 3 terms: drop the most negative term until all are >= 0.
+namespace {
+
+// Non-negative least squares over 3 terms (normal equations): drop the most negative term until all are >= 0.
+Eigen::Vector3d NonNegative3(const Eigen::Matrix3d& ata, const Eigen::Vector3d& atb) {
   std::array<bool, 3> active = {true, true, true};
   Eigen::Vector3d g = Eigen::Vector3d::Zero();
   for (int round = 0; round < 3; ++round) {
@@ -381,13 +358,85 @@ v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::Patch
     if (worst < 0) break;
     active[static_cast<std::size_t>(worst)] = false;
   }
+  for (int j = 0; j < 3; ++j) g[j] = active[static_cast<std::size_t>(j)] ? std::max(0.0, g[j]) : 0.0;
+  return g;
+}
+
+}  // namespace
+
+v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& d) {
+  v1::DecoderModel m = model;
+  m.clear_creep();
+  m.clear_input_range();
+  const decode::Pipeline<float> pipe(m, spec, OpenConfig(m, d));
+  const StreamPredictions p = DecodeStream(pipe, d);
+  const std::array<double, 3> tau = {1.0, 10.0, 100.0};
+  const double dt = 1.0 / d.info.sample_rate_hz;
+  std::array<double, 3> a{}, x{};
+  for (std::size_t k = 0; k < 3; ++k) a[k] = 1.0 - std::exp(-dt / tau[k]);
+  // The rows: each valid frame's decoded force, the applied force F and F low-passed with each tau (the
+  // twin's discretisation), and the press it belongs to (a press and the rest after it, up to the next press;
+  // the rest before the first press carries no creep and is left out).
+  struct Row {
+    double y, f;
+    Eigen::Vector3d x;
+    std::size_t press;
+  };
+  std::vector<Row> rows;
+  rows.reserve(d.size());
+  std::size_t presses = 0, pressed = 0;
+  std::int32_t current = -1;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double ref = Reference(d, k);
+    const double f = std::isfinite(ref) ? std::max(0.0, ref) : 0.0;
+    for (std::size_t j = 0; j < 3; ++j) x[j] += a[j] * (f - x[j]);
+    if (d.indentation[k] >= 0 && d.indentation[k] != current) {
+      current = d.indentation[k];
+      ++presses;
+    }
+    if (presses == 0 || !p.valid[k] || !std::isfinite(ref)) continue;
+    rows.push_back({p.force_n[k], f, Eigen::Vector3d(x[0], x[1], x[2]), presses - 1});
+    pressed += ref > 0.05;
+  }
+  if (pressed < 1000) throw InputError("creep fit: the data hold too few pressed frames (" + std::to_string(pressed) + "); use a field recording");
+  // decoded = s_p (F + sum g x): the networks read the strain force, each press at its own static scale s_p
+  // (another cast's gratings, gains fitted elsewhere, where on the patch it presses; not the creep's to
+  // correct). A fit without s_p reads a decoder that is 10 % low as negative creep: the x terms follow F
+  // within a press (x at tau 1 s correlates with F at 0.99), and the non-negative fit returns 0 (issue 17's
+  // four field casts). The creep is what changes within a press at a fixed scale: the rise over a hold, the
+  // residual after the release. Alternating least squares: the scales for the g, the g for the scales.
+  std::vector<double> scale(presses, 1.0);
+  Eigen::Vector3d g = Eigen::Vector3d::Zero();
+  for (int it = 0; it < 100; ++it) {
+    std::vector<double> num(presses, 0.0), den(presses, 0.0);
+    for (const Row& r : rows) {
+      const double fe = r.f + g.dot(r.x);
+      num[r.press] += r.y * fe;
+      den[r.press] += fe * fe;
+    }
+    // A press the decoder does not read (s <= 0) says nothing about the creep: left out.
+    for (std::size_t q = 0; q < presses; ++q) scale[q] = den[q] > 0 ? std::max(0.0, num[q] / den[q]) : 0.0;
+    Eigen::Matrix3d ata = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d atb = Eigen::Vector3d::Zero();
+    for (const Row& r : rows) {
+      const double s = scale[r.press];
+      if (!(s > 0)) continue;
+      const Eigen::Vector3d col = s * r.x;
+      ata += col * col.transpose();
+      atb += col * (r.y - s * r.f);
+    }
+    if (!(ata.trace() > 0)) throw InputError("creep fit: the decoder reads none of the presses");
+    const Eigen::Vector3d next = NonNegative3(ata, atb);
+    const double moved = (next - g).cwiseAbs().maxCoeff();
+    g = next;
+    if (moved < 1e-6) break;
+  }
   v1::CreepCompensation c;
   for (std::size_t j = 0; j < 3; ++j) {
-    c.add_g(static_cast<float>(std::max(0.0, active[j] ? g[static_cast<Eigen::Index>(j)] : 0.0)));
+    c.add_g(static_cast<float>(g[static_cast<Eigen::Index>(j)]));
     c.add_tau_s(static_cast<float>(tau[j]));
   }
   c.set_source(d.info.source);
-  (void)used;
   return c;
 }
 
@@ -457,6 +506,25 @@ GainFit FitGains(const v1::DecoderModel& model, const patch::PatchSpec& spec, co
   for (std::size_t r = 0; r < p.ranges.size(); ++r) {
     for (std::size_t k = p.ranges[r].first; k < p.ranges[r].second; ++k) start[k] = p.ranges[r].first;
   }
+  // What the force net should read: the applied force, or with a creep compensation in the model the strain
+  // force F + sum g x that the decoder's compensation turns back into F (the cover creeps under the cast's
+  // presses too: fitted against F, the gains would take the creep's mean rise into the cast's scale).
+  std::vector<float> target = p.force_n;
+  if (model.has_creep() && model.creep().g_size() > 0) {
+    const int terms = std::min(model.creep().g_size(), model.creep().tau_s_size());
+    std::vector<double> x(static_cast<std::size_t>(terms), 0.0), a(x.size());
+    for (int j = 0; j < terms; ++j) a[static_cast<std::size_t>(j)] = 1.0 - std::exp(-1.0 / (d.info.sample_rate_hz * model.creep().tau_s(j)));
+    for (std::size_t k = 0; k < d.size(); ++k) {
+      const double ref = Reference(d, k);
+      const double f = std::isfinite(ref) ? std::max(0.0, ref) : 0.0;
+      double strain = 0;
+      for (std::size_t j = 0; j < x.size(); ++j) {
+        x[j] += a[j] * (f - x[j]);  // the twin's discretisation, as FitCreep
+        strain += model.creep().g(static_cast<int>(j)) * x[j];
+      }
+      target[k] = static_cast<float>(p.force_n[k] + strain);
+    }
+  }
   const patch::Geometry geo(spec.surface_radius_mm);
   GainFit fit;
   fit.gain.assign(16, 1.0f);
@@ -477,7 +545,7 @@ GainFit FitGains(const v1::DecoderModel& model, const patch::PatchSpec& spec, co
         }
       }
       const float f = dec.ForceOnWindow(window.data(), data);
-      fe.push_back(std::abs(f - p.force_n[k]) * 1e3);
+      fe.push_back(std::abs(f - target[k]) * 1e3);
       if (p.force_n[k] > 0.05f) {
         dec.Probabilities(p.shift_pm[k], data, probs);
         const decode::Nip::Estimate e = dec.nip().Fuse(probs, spec.surface_radius_mm);

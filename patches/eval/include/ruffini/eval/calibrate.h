@@ -57,12 +57,16 @@ struct GainFit {
 };
 using GainProgress = std::function<void(int sweep, int sweeps, double objective)>;
 // Coordinate search over per-grating gains (0.6..1.6), the objective scored with the Eigen runtime on a
-// subsample of the data's indentation frames. The returned gains are not yet applied.
+// subsample of the data's indentation frames. The force net is scored against the applied force, or, when the
+// model has a creep compensation, against the strain force F + sum g x it reads under the creeping cover
+// (the compensation turns that back into F): fit the creep first. The returned gains are not yet applied.
 GainFit FitGains(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data,
                  int sweeps = 3, const GainProgress& progress = {});
 // Creep compensation: decodes press-hold-release data without compensation and fits the Prony gains g_k
-// (tau_s fixed: 1, 10, 100 s) by non-negative least squares of (decoded - applied force) on the applied
-// force low-passed with each tau. Throws InputError when the data hold no presses.
+// (tau_s fixed: 1, 10, 100 s, g >= 0) of decoded = s_p (F + sum g_k x_k), x_k the applied force F low-passed
+// with tau_k, with a free static scale s_p per press (the press and the rest after it): the creep is what
+// changes within a press, its scale error is the gains' (another cast, where on the patch it presses).
+// Alternating least squares. Throws InputError when the data hold too few pressed frames.
 v1::CreepCompensation FitCreep(const v1::DecoderModel& model, const patch::PatchSpec& spec, const dataset::Dataset& data);
 
 // Per-grating thermal sensitivity relative to the median grating, from a recording whose temperature moves:
