@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cstdio>
 #include <string>
 
 #include "process.h"
@@ -60,23 +61,25 @@ class Operator {
 
 struct Rig {
   std::string base;
+  std::string scenario;
   int grpc_port = 0, sim_port = 0, decoder_metrics = 0;
   rt::Process agg, sim;
   std::chrono::steady_clock::time_point sim_started;  // initialised in this order: after the sim, before the decoder
   rt::Process decoder;
-  explicit Rig(const std::string& name)
+  explicit Rig(const std::string& name, const std::string& scenario_path = kScenario, const std::string& max_frozen_s = "2")
       : base((fs::current_path() / name).string()),
+        scenario(scenario_path),
         agg(rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
                                 "--metrics", "127.0.0.1:0", "--patch-silence-ms", "200", "--patch-freshness-ms", "200"},
                                base + "/aggregator", "grpc", grpc_port)),
-        sim(rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kScenario, "--rate-hz", "100",
+        sim(rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", scenario, "--rate-hz", "100",
                                 "--command-port", "0", "--stream-port", "0"},
                                base + "/sim", "stream", sim_port)),
         sim_started(std::chrono::steady_clock::now()),
         decoder(rt::StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--interrogator",
                                     "127.0.0.1:" + std::to_string(sim_port), "--aggregator",
                                     "127.0.0.1:" + std::to_string(grpc_port), "--metrics", "127.0.0.1:0", "--rate-hz",
-                                    "100", "--silence-ms", "100", "--freshness-budget-ms", "200", "--max-frozen-s", "2"},
+                                    "100", "--silence-ms", "100", "--freshness-budget-ms", "200", "--max-frozen-s", max_frozen_s},
                                    base + "/decoder", "metrics", decoder_metrics)) {}
   [[nodiscard]] std::string address() const { return "127.0.0.1:" + std::to_string(grpc_port); }
   [[nodiscard]] double sim_s() const {
@@ -125,6 +128,33 @@ TEST(FaintReviewProcess, DISABLED_AHeldBaselineIsReportedFrozenForAsLongAsItIsHe
   const auto hb = op.Patch().last_heartbeat();
   ASSERT_EQ(hb.baseline_state(), v1::BASELINE_STATE_FROZEN) << hb.DebugString();
   EXPECT_GT(hb.baseline_frozen_s(), 4.0) << "held since the phantom at 4 s (now " << rig.sim_s() << " s)\n" << hb.DebugString();
+  rig.decoder.Stop();
+  rig.sim.Stop();
+}
+
+// A baseline error the refusal holds: grating 15 0.8 pm low from 4 s, then 2.25 N at the wrist edge on FBG 16
+// from 20 s, held 5 s (faint-review-held-scenario.yaml; the decoder's max_frozen_s 8 s). Flag only the error
+// makes the patch stale at about 12 s: FAULT. Refusing, nothing is reported and nothing faults before the
+// press, and the press is read below the threshold. The property: the robot is held (STOP or FAULT) by the
+// end of the press's hold. Measured: CLEAR throughout.
+TEST(FaintReviewProcess, DISABLED_APressAtTheWristEdgeOverAHeldBaselineErrorHoldsTheRobot) {
+  Rig rig("faint_review_held", kSrc + "/tests/aggregator/faint-review-held-scenario.yaml", "8");
+  Operator op(rig.address());
+  ASSERT_TRUE(rt::WaitFor([&] { return op.Reset(); }, 10s, 100ms)) << rig.agg.stderr_text() << rig.decoder.stderr_text();
+  ASSERT_LT(rig.sim_s(), 4.0) << "the machine is too slow for this scenario's timeline";
+  ASSERT_TRUE(rt::WaitFor([&] { return rig.sim_s() > 19.0; }, 25s, 50ms));
+  const auto before = op.Status();
+  std::printf("at 19 s (15 s into the error, max_frozen_s 8): %s, baseline %s, frozen_s %.1f\n",
+              v1::SafetyState::State_Name(before.safety().state()).c_str(),
+              v1::BaselineState_Name(before.patches(0).last_heartbeat().baseline_state()).c_str(),
+              before.patches(0).last_heartbeat().baseline_frozen_s());
+  // By the end of the press's hold (26 s at the sim's clock) the robot must be held.
+  const bool held = rt::WaitFor([&] { return op.Status().safety().state() != v1::SafetyState::STATE_CLEAR; }, 10s, 20ms) &&
+                    rig.sim_s() < 26.0;
+  const auto st = op.Status();
+  std::printf("at %.2f s: %s %s\n", rig.sim_s(), v1::SafetyState::State_Name(st.safety().state()).c_str(),
+              st.safety().cause().DebugString().c_str());
+  EXPECT_TRUE(held) << st.patches(0).last_heartbeat().DebugString();
   rig.decoder.Stop();
   rig.sim.Stop();
 }
