@@ -9,7 +9,9 @@
 
 #include <chrono>
 #include <cstdio>
+#include <fstream>
 #include <string>
+#include <vector>
 
 #include "process.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
@@ -59,27 +61,37 @@ class Operator {
   std::unique_ptr<v1::Aggregator::Stub> stub_;
 };
 
+std::vector<std::string> Concat(std::vector<std::string> a, const std::vector<std::string>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
 struct Rig {
   std::string base;
   std::string scenario;
+  std::string scene;
   int grpc_port = 0, sim_port = 0, decoder_metrics = 0;
   rt::Process agg, sim;
   std::chrono::steady_clock::time_point sim_started;  // initialised in this order: after the sim, before the decoder
   rt::Process decoder;
-  explicit Rig(const std::string& name, const std::string& scenario_path = kScenario, const std::string& max_frozen_s = "2")
+  explicit Rig(const std::string& name, const std::string& scenario_path = kScenario, const std::string& max_frozen_s = "2",
+               const std::string& scene_path = kScene, const std::vector<std::string>& decoder_extra = {})
       : base((fs::current_path() / name).string()),
         scenario(scenario_path),
-        agg(rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", kScene, "--listen", "127.0.0.1:0",
+        scene(scene_path),
+        agg(rt::StartWithPorts({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", scene, "--listen", "127.0.0.1:0",
                                 "--metrics", "127.0.0.1:0", "--patch-silence-ms", "200", "--patch-freshness-ms", "200"},
                                base + "/aggregator", "grpc", grpc_port)),
-        sim(rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", scenario, "--rate-hz", "100",
+        sim(rt::StartWithPorts({RUFFINI_SIM_EXE, "--scene", scene, "--scenario", scenario, "--rate-hz", "100",
                                 "--command-port", "0", "--stream-port", "0"},
                                base + "/sim", "stream", sim_port)),
         sim_started(std::chrono::steady_clock::now()),
-        decoder(rt::StartWithPorts({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--interrogator",
-                                    "127.0.0.1:" + std::to_string(sim_port), "--aggregator",
-                                    "127.0.0.1:" + std::to_string(grpc_port), "--metrics", "127.0.0.1:0", "--rate-hz",
-                                    "100", "--silence-ms", "100", "--freshness-budget-ms", "200", "--max-frozen-s", max_frozen_s},
+        decoder(rt::StartWithPorts(Concat({RUFFINI_DECODER_EXE, "--insecure", "--scene", scene, "--interrogator",
+                                           "127.0.0.1:" + std::to_string(sim_port), "--aggregator",
+                                           "127.0.0.1:" + std::to_string(grpc_port), "--metrics", "127.0.0.1:0",
+                                           "--rate-hz", "100", "--silence-ms", "100", "--freshness-budget-ms", "200",
+                                           "--max-frozen-s", max_frozen_s},
+                                          decoder_extra),
                                    base + "/decoder", "metrics", decoder_metrics)) {}
   [[nodiscard]] std::string address() const { return "127.0.0.1:" + std::to_string(grpc_port); }
   [[nodiscard]] double sim_s() const {
@@ -155,6 +167,37 @@ TEST(FaintReviewProcess, DISABLED_APressAtTheWristEdgeOverAHeldBaselineErrorHold
   std::printf("at %.2f s: %s %s\n", rig.sim_s(), v1::SafetyState::State_Name(st.safety().state()).c_str(),
               st.safety().cause().DebugString().c_str());
   EXPECT_TRUE(held) << st.patches(0).last_heartbeat().DebugString();
+  rig.decoder.Stop();
+  rig.sim.Stop();
+}
+
+// Review 7 finding 4: the aggregator checks a refusing model against the region's threshold only when the
+// scene names the model (`model:`; the hello's model_sha256 is then checked against it). A scene that names
+// none takes any decoder's model: here a 0.8 N region, and a decoder given --model forearm-field.rmodel,
+// which refuses faint contacts up to 1 N (a faint 0.8-1 N contact is no contact: the region's stop is lowered
+// by the refusal). The hello does not carry the refusal (DecoderConfig has no faint field). The property: the
+// aggregator does not run a patch whose decoder may refuse a force its region stops on. Measured: the patch
+// is healthy and the aggregator CLEAR.
+TEST(FaintReviewProcess, DISABLED_ADecoderThatRefusesBelowItsRegionsThresholdIsNotRunUnseen) {
+  const std::string dir = (fs::current_path() / "faint_review_nomodel").string();
+  fs::create_directories(dir);
+  std::ifstream in(kScene);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string model_line = "    model: ../../config/models/forearm-field.rmodel\n";
+  ASSERT_NE(text.find(model_line), std::string::npos);
+  text.erase(text.find(model_line), model_line.size());
+  text.replace(text.find("threshold_n: 1.5"), 16, "threshold_n: 0.8");
+  for (std::size_t at = text.find("../../"); at != std::string::npos; at = text.find("../../", at)) text.replace(at, 6, kSrc + "/");
+  const std::string scene = dir + "/no-model.yaml";
+  std::ofstream(scene) << text;
+  Rig rig("faint_review_nomodel", kScenario, "2", scene, {"--model", kSrc + "/config/models/forearm-field.rmodel"});
+  Operator op(rig.address());
+  const bool cleared = rt::WaitFor([&] { return op.Reset(); }, 10s, 100ms);
+  const auto st = op.Status();
+  std::printf("scene without a model, 0.8 N region, decoder on forearm-field.rmodel: reset %s, link %s, state %s\n",
+              cleared ? "accepted" : "refused", v1::LinkState_Name(st.patches(0).link_state()).c_str(),
+              v1::SafetyState::State_Name(st.safety().state()).c_str());
+  EXPECT_FALSE(cleared) << rig.agg.stderr_text();
   rig.decoder.Stop();
   rig.sim.Stop();
 }
