@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "process.h"
+#include "ruffini/decode/model_io.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "scrape.h"
 #include "service_process.h"
@@ -198,6 +199,38 @@ TEST(FaintReviewProcess, DISABLED_ADecoderThatRefusesBelowItsRegionsThresholdIsN
               cleared ? "accepted" : "refused", v1::LinkState_Name(st.patches(0).link_state()).c_str(),
               v1::SafetyState::State_Name(st.safety().state()).c_str());
   EXPECT_FALSE(cleared) << rig.agg.stderr_text();
+  rig.decoder.Stop();
+  rig.sim.Stop();
+}
+
+// The contrast to finding 1: the same scenario, the decoder on a copy of the field model with the refusal off
+// (faint_refuse_below_n 0, flag only). The error keeps the gate open, the baseline goes stale within
+// max_frozen_s (8 s) and the patch FAULTs long before the press. Holds.
+TEST(FaintReviewProcess, FlagOnlyTheSameHeldErrorFaultsBeforeThePress) {
+  const std::string dir = (fs::current_path() / "faint_review_flag_only").string();
+  fs::create_directories(dir);
+  v1::DecoderModel m = ruffini::decode::LoadModel(kSrc + "/config/models/forearm-field.rmodel");
+  ASSERT_GT(m.preprocessing().faint_refuse_below_n(), 0.0f) << "the shipped field model refuses";
+  m.mutable_preprocessing()->set_faint_refuse_below_n(0.0f);
+  ruffini::decode::SaveModel(dir + "/forearm-field-flag-only.rmodel", m);
+  std::ifstream in(kScene);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string model_line = "../../config/models/forearm-field.rmodel";
+  ASSERT_NE(text.find(model_line), std::string::npos);
+  text.replace(text.find(model_line), model_line.size(), dir + "/forearm-field-flag-only.rmodel");
+  for (std::size_t at = text.find("../../"); at != std::string::npos; at = text.find("../../", at)) text.replace(at, 6, kSrc + "/");
+  const std::string scene = dir + "/flag-only.yaml";
+  std::ofstream(scene) << text;
+  Rig rig("faint_review_flag_only_run", kSrc + "/tests/aggregator/faint-review-held-scenario.yaml", "8", scene);
+  Operator op(rig.address());
+  ASSERT_TRUE(rt::WaitFor([&] { return op.Reset(); }, 10s, 100ms)) << rig.agg.stderr_text() << rig.decoder.stderr_text();
+  ASSERT_LT(rig.sim_s(), 4.0) << "the machine is too slow for this scenario's timeline";
+  ASSERT_TRUE(rt::WaitFor([&] { return op.Status().safety().state() != v1::SafetyState::STATE_CLEAR; }, 20s, 20ms));
+  const auto st = op.Status();
+  std::printf("flag only: held at %.2f s: %s\n", rig.sim_s(), st.safety().cause().DebugString().c_str());
+  EXPECT_LT(rig.sim_s(), 20.0) << "held only at the press";
+  EXPECT_EQ(st.safety().state(), v1::SafetyState::STATE_FAULT);
+  EXPECT_EQ(st.safety().cause().patch_fault(), v1::PATCH_FAULT_CODE_BASELINE_STALE) << st.safety().DebugString();
   rig.decoder.Stop();
   rig.sim.Stop();
 }

@@ -409,8 +409,9 @@ TEST(FaintRefusalReview, DISABLED_ABaselineErrorHeldWithoutAStaleClockNeverLoses
   EXPECT_EQ(lost, 0);
 }
 
-// The embedded model on the gradient scene (40 pm/C, a field across the patch), the same sweep.
-TEST(FaintRefusalReview, DISABLED_ABaselineErrorHeldWithoutAStaleClockNeverLosesAStopEmbedded) {
+// The embedded model on the gradient scene (40 pm/C, a field across the patch), the same sweep. Holds: none of
+// its patterns is held without a FAULT (the thermal-field follower and the field move the shifts).
+TEST(FaintRefusalReview, ABaselineErrorHeldWithoutAStaleClockNeverLosesAStopEmbedded) {
   std::size_t held = 0;
   const auto cases = HeldErrorSweep(GradientScene(), EmbeddedModel(), 30, &held);
   int lost = 0;
@@ -420,11 +421,13 @@ TEST(FaintRefusalReview, DISABLED_ABaselineErrorHeldWithoutAStaleClockNeverLoses
 }
 
 
-// Q1 / Q2: a light press held for an hour (HOLD_S to change it) at weak sites, then raised at 10 N/s to
-// 2.25 N: the raised press's largest reading and its STOP, refusing and flag only, against the same raise
-// after a 60 s hold. Flag only, a hold the networks read faint and in contact goes stale after 300 s (FAULT).
-TEST(FaintRefusalReview, AnHourLongLightPressRaisedToAStopIsReadAsAfterAMinute) {
-  const double hold_s = std::getenv("HOLD_S") ? std::atof(std::getenv("HOLD_S")) : 3600.0;
+// Q1 / Q2: a light press held long (HOLD_S, default 400 s: past max_frozen_s; the review ran 3600 s) at weak
+// sites, then raised at 10 N/s to 2.25 N. Holds: refusing or flag only, the robot is held (STOP or FAULT) by
+// the end of the raised press whenever the same raise after a 60 s hold stops. These light presses are mostly
+// not faint (their shifts pass 1.25 pm), so both decoders go stale about 300 s into the hold (the review's
+// latch, unchanged): the FAULT is the STOP.
+TEST(FaintRefusalReview, ALongLightPressRaisedToAStopHoldsTheRobotRefusingOrNot) {
+  const double hold_s = std::getenv("HOLD_S") ? std::atof(std::getenv("HOLD_S")) : 400.0;
   const auto sites = WeakSites();
   struct Run {
     const twin::Scene* scene;
@@ -434,34 +437,31 @@ TEST(FaintRefusalReview, AnHourLongLightPressRaisedToAStopIsReadAsAfterAMinute) 
   for (const Run& run : {Run{&FieldScene(), &FieldModel(), "field"}, Run{&GradientScene(), &EmbeddedModel(), "gradient"}}) {
     for (const std::size_t j : {std::size_t{0}, std::size_t{2}, std::size_t{7}}) {
       for (const double light : {0.5, 0.9}) {
-        float top[2][2] = {};
-        std::size_t stop[2][2] = {}, faults[2][2] = {}, refused = 0;
+        bool held[2][2] = {};
+        std::size_t faults[2] = {}, refused = 0;
         for (int longhold = 0; longhold < 2; ++longhold) {
           const Schedule s = LightThenRaise(10, light, longhold ? hold_s : 60.0, 10.0, 2.25, 10);
           const auto wl = Synthesize(*run.scene, {{sites[j].second, s.force}}, s.force.size());
           for (int refuse = 0; refuse < 2; ++refuse) {
             const Decoded d = DecodeAll(*run.model, *run.scene, wl, refuse ? std::nullopt : std::optional<bool>(false));
-            top[longhold][refuse] = MaxReported(d, s.raise_from, s.top_last);
-            stop[longhold][refuse] = FirstStop(d, s.raise_from, true) - s.cross;
-            faults[longhold][refuse] = CountFault(d, 1000, s.raise_from);
+            held[longhold][refuse] = FirstStop(d, 1000) < s.top_last;
+            if (longhold) faults[refuse] = CountFault(d, 1000, s.raise_from);
             if (refuse && longhold) refused = d.refused;
           }
         }
-        std::printf("%s %-24s %.1f N held %.0f s, raised: max %.2f N refusing / %.2f N flag only (after 60 s: %.2f / %.2f); "
-                    "force STOP %+.2f / %+.2f s after the crossing (after 60 s: %+.2f / %+.2f); FAULT frames during the hold "
-                    "%zu / %zu; %zu refused\n",
-                    run.name, sites[j].first.c_str(), light, hold_s, top[1][1], top[1][0], top[0][1], top[0][0],
-                    static_cast<double>(static_cast<long>(stop[1][1])) / kRate, static_cast<double>(static_cast<long>(stop[1][0])) / kRate,
-                    static_cast<double>(static_cast<long>(stop[0][1])) / kRate, static_cast<double>(static_cast<long>(stop[0][0])) / kRate,
-                    faults[1][1], faults[1][0], refused);
-        if (top[0][1] > kThreshold) {
-          EXPECT_GT(top[1][1], kThreshold) << run.name << " " << sites[j].first << " " << light;
+        std::printf("%s %-24s %.1f N held %.0f s, raised to 2.25 N: robot held refusing %d / flag only %d (after 60 s: %d / %d); "
+                    "FAULT frames during the hold %zu / %zu; %zu frames refused\n",
+                    run.name, sites[j].first.c_str(), light, hold_s, held[1][1], held[1][0], held[0][1], held[0][0],
+                    faults[1], faults[0], refused);
+        for (int refuse = 0; refuse < 2; ++refuse) {
+          if (held[0][refuse]) {
+            EXPECT_TRUE(held[1][refuse]) << run.name << " " << sites[j].first << " " << light << " refuse " << refuse;
+          }
         }
       }
     }
   }
 }
-
 
 // The sweep's worst case, held long. Grating 15 sits 0.8 pm low from 20 s (a baseline error of the size a
 // released edge press leaves, review field.md finding 1(a)); nothing touches for 30 min; then 2.25 N at the
@@ -515,6 +515,42 @@ TEST(FaintRefusalReview, DISABLED_ABaselineErrorThatHidesAStopDoesNotOutlastMaxF
     }
   }
   EXPECT_LT(stop, limit) << "refusing: no STOP or FAULT within max_frozen_s + 60 s of the error, nor on the press";
+}
+
+
+// Holds: a slowly growing error. FBG 15 drifts from 0 to -0.8 or -1.2 pm over 20 min (0.001 pm/s: a grating's
+// own slow drift), then stays; 2.25 N at the wrist edge at 30 min. The gate stays closed, the tracker follows
+// the drift (tau 30 s: a lag of 0.03 pm), nothing is held, and the press stops in both modes. The dangerous
+// error is a step (a released press's residue, finding 1), not a drift.
+TEST(FaintRefusalReview, ASlowlyGrowingBaselineErrorIsTrackedAndThePressStops) {
+  const auto sites = WeakSites();
+  const patch::SurfacePoint at = sites[0].second;
+  const std::size_t on = 2000, grow = 120000, press = 180000;
+  std::vector<double> f(press, 0.0);
+  for (int k = 1; k <= 100; ++k) f.push_back(2.25 * k / 100);
+  for (int k = 0; k < 500; ++k) f.push_back(2.25);
+  const std::size_t last = f.size();
+  for (int k = 0; k < 300; ++k) f.push_back(0.0);
+  for (const double final_pm : {-0.8, -1.2}) {
+    const auto wl = Synthesize(FieldScene(), {{at, f}}, f.size(), [&](std::size_t k) {
+      Offsets e{};
+      if (k >= on) e[14] = final_pm * std::min(1.0, static_cast<double>(k - on) / static_cast<double>(grow));
+      return e;
+    });
+    for (const bool refuse : {true, false}) {
+      const Decoded d = DecodeAll(FieldModel(), FieldScene(), wl, refuse ? std::nullopt : std::optional<bool>(false));
+      std::size_t refused = 0, contacts = 0;
+      for (std::size_t k = on; k < press; ++k) {
+        refused += d.out[k].valid && d.out[k].faint && !d.out[k].in_contact;
+        contacts += d.out[k].in_contact;
+      }
+      std::printf("FBG15 drifting to %.1f pm over 1200 s, %s: %zu frames refused, %zu in contact, %zu FAULT frames before "
+                  "the press; press read %.2f N\n",
+                  final_pm, refuse ? "refusing" : "flag only", refused, contacts, CountFault(d, on, press),
+                  MaxReported(d, press, last));
+      EXPECT_LT(FirstStop(d, press), last) << final_pm << " refuse " << refuse;
+    }
+  }
 }
 
 }  // namespace
