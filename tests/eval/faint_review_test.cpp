@@ -23,6 +23,7 @@
 
 #include "ruffini/decode/model_io.h"
 #include "ruffini/decode/pipeline.h"
+#include "ruffini/twin/protocols.h"
 #include "ruffini/twin/scene.h"
 #include "ruffini/twin/twin.h"
 #include "ruffini/twin/viscoelastic.h"
@@ -550,6 +551,50 @@ TEST(FaintRefusalReview, ASlowlyGrowingBaselineErrorIsTrackedAndThePressStops) {
                   MaxReported(d, press, last));
       EXPECT_LT(FirstStop(d, press), last) << final_pm << " refuse " << refuse;
     }
+  }
+}
+
+
+// Q4: the scene check bounds a raising stop rule (sd_k > 0) with the largest sd of the model's Uncertainty
+// table. A frame can report a larger sd only through the two-touch fit (RaiseForPair: the pair's sd), which
+// needs a response map. Printed for the two refusing models on one validation hour (seed 801, flag only):
+// whether they carry a map, and the faint contact frames below 1 N whose reported sd exceeds the table's
+// largest (those a raising rule could stop on flag only, which the refusal drops). Holds when there are none.
+TEST(FaintRefusalReview, NoFaintFrameBelowTheRefusalReportsAnSdAboveTheModelsTable) {
+  struct Run {
+    const twin::Scene* scene;
+    const v1::DecoderModel* model;
+    const char* name;
+  };
+  for (const Run& run : {Run{&FieldScene(), &FieldModel(), "forearm-field"}, Run{&GradientScene(), &EmbeddedModel(), "forearm-embedded"}}) {
+    const auto& sd = run.model->uncertainty().force_sd_n();
+    ASSERT_FALSE(sd.empty());
+    const float table_max = *std::max_element(sd.begin(), sd.end());
+    const twin::SkinTwin t(run.scene->Patch().spec, run.scene->EffectsOf(0), {run.scene->probe.radius_mm});
+    twin::FieldProtocol fp;
+    fp.duration_s = 3600.0;
+    std::vector<Wavelengths> wl;
+    twin::RunField(t, *run.scene, fp, 801, [&](std::span<const dataset::Frame> frames) {
+      for (const auto& f : frames) {
+        Wavelengths w{};
+        std::copy_n(f.wavelength_nm.begin(), kGratings, w.begin());
+        wl.push_back(w);
+      }
+    });
+    const Decoded d = DecodeAll(*run.model, *run.scene, wl, false);
+    std::size_t faint = 0, above = 0, multiple = 0;
+    float largest = 0;
+    for (const auto& o : d.out) {
+      if (!(o.valid && o.in_contact && o.faint && o.force_n < 1.0f)) continue;
+      ++faint;
+      multiple += o.multiple;
+      above += o.force_sd_n > table_max;
+      largest = std::max(largest, o.force_sd_n);
+    }
+    std::printf("%s (response map %s): %zu faint contact frames below 1 N, %zu flagged multiple, %zu with an sd above the "
+                "table's %.3f N (largest %.3f N)\n",
+                run.name, run.model->has_response() ? "yes" : "no", faint, multiple, above, table_max, largest);
+    EXPECT_EQ(above, 0u) << run.name;
   }
 }
 
