@@ -1,7 +1,7 @@
 // Review 7 (docs/reviews/faint-refusal.md), end to end with the real executables on 127.0.0.1 (port 0, ports
 // files): ruffini-sim plays tests/aggregator/faint-review-scenario.yaml (grating 16 left 0.8 pm low from 4 s: a
 // faint phantom; a 2.25 N press at the centre from 14 s), one ruffini-decoder on the field model (it refuses
-// faint contacts below 1 N; staleness after 2 s), ruffini-aggregator (1.5 N). This test is the operator
+// faint contacts below 1 N; staleness after 2 or 8 s), ruffini-aggregator (1.5 N). This test is the operator
 // (GetStatus, ResetStop) and scrapes the decoder's metrics. Every wait is a condition with a deadline; every
 // process is stopped by pid. The sim's clock starts with its process.
 #include <grpcpp/grpcpp.h>
@@ -100,16 +100,19 @@ struct Rig {
   }
 };
 
-// Holds: the phantom that latched a flag-only decoder into a stale FAULT (the re-tare test's scenario) is held
-// without a FAULT, the refusal is named in the decoder's log, its frames are counted, and the press that must
+// Holds: the phantom that latched a flag-only decoder into a stale FAULT (the re-tare test's scenario; flag
+// only it FAULTs about 12 s, FlagOnlyTheSameHeldErrorFaultsBeforeThePress) is held without a FAULT, the refusal is named in the decoder's log, its frames are counted, and the press that must
 // stop stops.
 TEST(FaintReviewProcess, AFaintPhantomHeldWithoutAFaultStillStopsOnAPressAndTheRefusalIsLogged) {
-  Rig rig("faint_review_stop");
+  // max_frozen_s 8 s: the few frames noise lifts out of the refusal (at 1 N or above, or not faint) run the
+  // stale clock; 8 s of them cannot fit in the 10 s before the press.
+  Rig rig("faint_review_stop", kScenario, "8");
   Operator op(rig.address());
   ASSERT_TRUE(rt::WaitFor([&] { return op.Reset(); }, 10s, 100ms)) << rig.agg.stderr_text() << rig.decoder.stderr_text();
   ASSERT_LT(rig.sim_s(), 4.0) << "the machine is too slow for this scenario's timeline";
-  // The phantom from 4 s: 8 s later the patch is neither stale nor faulted, and nothing stopped.
-  ASSERT_TRUE(rt::WaitFor([&] { return rig.sim_s() > 12.0; }, 15s, 50ms));
+  // The phantom from 4 s: 9.5 s later (past max_frozen_s) the patch is neither stale nor faulted, and nothing
+  // stopped.
+  ASSERT_TRUE(rt::WaitFor([&] { return rig.sim_s() > 13.5; }, 15s, 50ms));
   const auto before = op.Status();
   EXPECT_EQ(before.safety().state(), v1::SafetyState::STATE_CLEAR) << before.safety().DebugString();
   EXPECT_EQ(before.patches(0).last_heartbeat().baseline_state(), v1::BASELINE_STATE_FROZEN)
@@ -134,7 +137,7 @@ TEST(FaintReviewProcess, AFaintPhantomHeldWithoutAFaultStillStopsOnAPressAndTheR
 // phantom. Under kHold the stale clock does not run, and the heartbeat reports the clock, not the time held:
 // measured 0.0 s after 8 s of hold.
 TEST(FaintReviewProcess, DISABLED_AHeldBaselineIsReportedFrozenForAsLongAsItIsHeld) {
-  Rig rig("faint_review_frozen");
+  Rig rig("faint_review_frozen", kScenario, "8");
   Operator op(rig.address());
   ASSERT_TRUE(rt::WaitFor([&] { return op.Reset(); }, 10s, 100ms)) << rig.agg.stderr_text() << rig.decoder.stderr_text();
   ASSERT_TRUE(rt::WaitFor([&] { return rig.sim_s() > 12.0; }, 15s, 50ms));
