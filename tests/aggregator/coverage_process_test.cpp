@@ -211,3 +211,49 @@ TEST(CoverageProcess, AFaintRefusingModelUnderAStopRuleThatCouldStopBelowItIsRef
   rt::Process plain({RUFFINI_EXE, "check-scene", MakeScene(dir1, rule("3"))}, dir1);
   EXPECT_EQ(plain.WaitExit(30s), 0) << "the flag-only model under the same rule\n" << plain.stdout_text() << plain.stderr_text();
 }
+
+// Review 7 (docs/reviews/faint-refusal.md), finding 3: the faint-refusal check compares each patch's refusal
+// force with its region's threshold alone, but a contact on a seam is judged on the sum of both sides' forces
+// (safety.seam_sum, aggregate::Core::JudgeOnSeam; the fuser adds them as well). On the
+// cobot scene (forearm_a | forearm_b, a seam, 1.5 N) with both forearm models refusing below 1 N, a seam touch
+// read 0.8 N on each side stops at 1.6 N flag only and is refused on both sides (no contact at all). The
+// property: a scene where refused frames could add up to a stop is refused (or the threshold is at least the
+// largest sum of refusal forces a fused contact can have).
+TEST(CoverageProcess, DISABLED_ASceneWhereRefusedFaintFramesOfASeamCouldAddUpToAStopIsRefused) {
+  const std::string dir = (fs::current_path() / "coverage_faint_seam").string();
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  for (const char* p : {"forearm_a", "forearm_b"}) {
+    v1::DecoderModel m = ruffini::decode::LoadModel(kSrc + "/config/models/cobot-" + p + ".rmodel");
+    m.mutable_preprocessing()->set_faint_refuse_below_n(1.0f);
+    ruffini::decode::SaveModel(dir + "/refusing-" + p + ".rmodel", m);
+  }
+  std::ifstream in(kSrc + "/config/scenes/cobot.yaml");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  auto replace_all = [&](const std::string& from, const std::string& to) {
+    for (std::size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) {
+      text.replace(at, from.size(), to);
+    }
+  };
+  replace_all("../models/cobot-forearm_a.rmodel", dir + "/refusing-forearm_a.rmodel");
+  replace_all("../models/cobot-forearm_b.rmodel", dir + "/refusing-forearm_b.rmodel");
+  replace_all("../", kSrc + "/config/");
+  const std::string scene = dir + "/cobot-refusing.yaml";
+  std::ofstream(scene) << text;
+  // the same scene with the shipped (flag-only) models loads: the test can tell
+  std::string plain_text = text;
+  {
+    std::string t = text;
+    for (const char* p : {"forearm_a", "forearm_b"}) {
+      const std::string from = dir + "/refusing-" + p + ".rmodel";
+      t.replace(t.find(from), from.size(), kSrc + "/config/models/cobot-" + p + ".rmodel");
+    }
+    plain_text = t;
+  }
+  std::ofstream(dir + "/cobot-plain.yaml") << plain_text;
+  rt::Process plain({RUFFINI_EXE, "check-scene", dir + "/cobot-plain.yaml"}, dir);
+  ASSERT_EQ(plain.WaitExit(60s), 0) << plain.stdout_text() << plain.stderr_text();
+  rt::Process check({RUFFINI_EXE, "check-scene", scene}, dir);
+  EXPECT_EQ(check.WaitExit(60s), 1) << "check-scene accepts two refusing models on a seam under a 1.5 N region:\n"
+                                    << check.stdout_text() << check.stderr_text();
+}
