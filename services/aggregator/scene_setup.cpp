@@ -172,6 +172,27 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
     bands.push_back({b.name, b.patch, b.y_min_mm, b.y_max_mm, b.r_min_deg, b.r_max_deg, b.source});
   }
   std::string refusal;
+  // Patches on a seam: a seam contact is judged on the sum of both sides' forces (the fuser adds them), so a
+  // side that refuses faint contacts could drop part of a stop whatever its refusal force.
+  std::vector<bool> on_seam(scene.patches.size(), false);
+  if (file.robot) {
+    const robot::RobotScene rs = robot::LoadRobotScene(file);
+    std::vector<robot::MountedSurface> surfaces;
+    for (const twin::ScenePatch& p : scene.patches) {
+      const robot::MountedPatch* m = rs.FindPatch(p.name);
+      if (m == nullptr) throw InputError(scene_path + ": patch '" + p.name + "' has no mount");
+      surfaces.push_back({m->mount, p.spec.extent_y_mm, p.spec.extent_r_deg});
+    }
+    for (const robot::Seam& seam : robot::FindSeams(surfaces)) on_seam[seam.a] = on_seam[seam.b] = true;
+  }
+  for (std::size_t i = 0; i < scene.patches.size(); ++i) {
+    if (!has_model[i] || !on_seam[i] || !(models[i].preprocessing().faint_refuse_below_n() > 0.0f)) continue;
+    refusal += std::string(refusal.empty() ? "" : "; ") + "patch " + scene.patches[i].name + "'s model " +
+               scene.patches[i].model_path + " refuses faint contacts below " +
+               Num(models[i].preprocessing().faint_refuse_below_n()) +
+               " N, but the patch shares a seam: a seam contact is judged on the sum of both sides, so a refused side "
+               "could be part of a stop (run a model that does not refuse on a seamed patch)";
+  }
   for (const safety::RegionConfig& r : config.regions) {
     std::vector<decode::CoveragePatch> patches;
     for (std::size_t i = 0; i < scene.patches.size(); ++i) {

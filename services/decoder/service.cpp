@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <boost/asio.hpp>
 #include <boost/lockfree/spsc_queue.hpp>
 #include <chrono>
@@ -249,6 +250,16 @@ class RingSink final : public link::MessageSink {
   std::size_t head_ = 0, pending_ = 0;
   std::uint64_t dropped_ = 0;
 };
+
+// The model's faint refusal for labels: "off", or the force in newtons below which faint frames are no contact
+// ("1.00").
+std::string FaintRefusal(const v1::DecoderModel& m) {
+  const float below = m.preprocessing().faint_refuse_below_n();
+  if (!(below > 0.0f)) return "off";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f", static_cast<double>(below));
+  return buf;
+}
 
 }  // namespace
 
@@ -677,6 +688,7 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
   dc.set_baseline_max_frozen_s(pc.baseline.max_frozen_s);
   dc.set_gate_on_n(s.model.gating().on_n());
   dc.set_gate_off_n(s.model.gating().off_n());
+  dc.set_faint_refuse_below_n(s.model.preprocessing().faint_refuse_below_n());
   std::string bytes;
   dc.SerializeToString(&bytes);
   dc.set_config_sha256(service::Sha256Hex(s.config.decoder + '\n' + bytes));
@@ -704,7 +716,8 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
       std::vector<std::pair<std::string, std::string>>{{"decoder", s.choice.name},
                                                        {"model", h.model_name()},
                                                        {"model_sha256", s.model_sha256.substr(0, 16)},
-                                                       {"version", kVersion}});
+                                                       {"version", kVersion},
+                                                       {"faint_refuse_below_n", FaintRefusal(s.model)}});
   s.exposer->RegisterCollectable(s.collectable);
   s.exposer->RegisterCollectable(service::ProcessMetrics());  // process_cpu_seconds_total, memory, fds
 
@@ -770,9 +783,8 @@ std::string DecoderService::Describe() const {
          std::to_string(static_cast<int>(s.config.rate_hz)) + " Hz, heartbeat " +
          std::to_string(static_cast<double>(s.monitor_config.heartbeat_period_ns) / 1e6) + " ms, silence deadline " +
          std::to_string(static_cast<double>(s.monitor_config.silence_deadline_ns) / 1e6) + " ms, " +
-         (s.model.preprocessing().faint_refuse_below_n() > 0
-              ? "faint contacts below " + std::to_string(s.model.preprocessing().faint_refuse_below_n()) + " N refused"
-              : std::string("faint contacts flagged")) +
+         (FaintRefusal(s.model) == "off" ? std::string("faint frames flagged only")
+                                         : "faint frames below " + FaintRefusal(s.model) + " N refused") +
          " (the model's), interrogator " +
          s.config.interrogator.str() + ", aggregator " + s.config.aggregator.str();
 }

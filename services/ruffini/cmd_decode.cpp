@@ -397,7 +397,7 @@ void RegisterCalibrate(CLI::App& app) {
                   "docs/decoders.md): keep the model's choice, on or off")
       ->check(CLI::IsMember({"keep", "on", "off"}))->capture_default_str();
   cmd->add_option("--faint-refuse-below-n", a->faint_refuse_below_n,
-                  "A cast whose baseline errors latch in the field: faint contact frames below this force are no contact "
+                  "A field cast with many false contacts: faint contact frames below this force are no contact "
                   "(Preprocessing.faint_refuse_below_n; 0: off; default: keep the model's; docs/decoders.md \"Faint frames\")")
       ->check(CLI::Range(0.0, 10.0));
   cmd->add_option("--sweeps", a->sweeps, "Coordinate sweeps of the gain fit")->check(CLI::Range(1, 20))->capture_default_str();

@@ -25,7 +25,7 @@ inline std::optional<bool> ModelOnOff(const std::string& v) {
   return std::nullopt;
 }
 inline constexpr const char* kFaintRefuseHelp =
-    "Faint contact frames below the model's force (or 1 N) are no contact and the baseline keeps tracking: as the model "
-    "says (Preprocessing.faint_refuse_below_n), on or off (docs/decoders.md \"Faint frames\")";
+    "Faint contact frames below the model's force (or 1 N) are no contact (the baseline stays frozen, its stale clock "
+    "runs): as the model says (Preprocessing.faint_refuse_below_n), on or off (docs/decoders.md \"Faint frames\")";
 
 }  // namespace ruffini::cli

@@ -219,7 +219,7 @@ TEST(CoverageProcess, AFaintRefusingModelUnderAStopRuleThatCouldStopBelowItIsRef
 // read 0.8 N on each side stops at 1.6 N flag only and is refused on both sides (no contact at all). The
 // property: a scene where refused frames could add up to a stop is refused (or the threshold is at least the
 // largest sum of refusal forces a fused contact can have).
-TEST(CoverageProcess, DISABLED_ASceneWhereRefusedFaintFramesOfASeamCouldAddUpToAStopIsRefused) {
+TEST(CoverageProcess, ASceneWhereRefusedFaintFramesOfASeamCouldAddUpToAStopIsRefused) {
   const std::string dir = (fs::current_path() / "coverage_faint_seam").string();
   fs::remove_all(dir);
   fs::create_directories(dir);

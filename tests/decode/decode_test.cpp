@@ -296,27 +296,6 @@ TEST(BaselineTest, FrozenTooLongIsStaleAndNotReleased) {
   EXPECT_NEAR(s[3], 50.0f, 0.5f);  // still measured against the old baseline: the press is not eaten
 }
 
-// Gate::kHold (a refused faint contact): frozen as under kOpen, the shift measured against the old baseline
-// (nothing absorbed), but the stale clock does not run; kOpen afterwards resumes it where it stood.
-TEST(BaselineTest, AHeldGateFreezesWithoutRunningTheStaleClock) {
-  BaselineConfig c;
-  c.max_frozen_s = 2.0;
-  BaselineTracker t(c);
-  Wavelengths wl = Nominal();
-  ShiftsPm s;
-  for (int k = 0; k < c.capture_frames; ++k) t.Update(wl, s, BaselineTracker::Gate::kClosed);
-  wl[3] += 0.001;  // 1 pm
-  for (int k = 0; k < 150; ++k) t.Update(wl, s, BaselineTracker::Gate::kOpen);
-  EXPECT_NEAR(t.frozen_s(), 1.5, 1e-9);
-  for (int k = 0; k < 1000; ++k) t.Update(wl, s, BaselineTracker::Gate::kHold);
-  EXPECT_EQ(t.state(), BaselineTracker::State::kFrozen);
-  EXPECT_FALSE(t.stale());
-  EXPECT_NEAR(t.frozen_s(), 1.5, 1e-9);
-  EXPECT_NEAR(s[3], 1.0f, 0.05f);  // not absorbed
-  for (int k = 0; k < 51; ++k) t.Update(wl, s, BaselineTracker::Gate::kOpen);
-  EXPECT_TRUE(t.stale());
-}
-
 TEST(BaselineTest, MedianOfPresentGratings) {
   ShiftsPm s;
   for (std::size_t i = 0; i < 16; ++i) s[i] = static_cast<float>(i);

@@ -214,6 +214,8 @@ TEST_F(DecoderProcess, HelloThenHeartbeatsThenContactsWithTheDecodersAccuracy) {
   EXPECT_EQ(Metric(text, "ruffini_decoder_aggregator_connected{patch=\"forearm\"}"), 1.0);
   EXPECT_EQ(Metric(text, "ruffini_decoder_healthy{patch=\"forearm\"}"), 1.0);
   EXPECT_NE(text.find("ruffini_decoder_info{patch=\"forearm\",decoder=\"paper-float\""), std::string::npos);
+  EXPECT_NE(text.find("faint_refuse_below_n=\"off\""), std::string::npos) << "forearm.rmodel: flag only";
+  EXPECT_EQ(first.hello().decoder_config().faint_refuse_below_n(), 0.0f);
 
   // SIGTERM: the last message is the shutting_down fault, and the process exits 0.
   EXPECT_EQ(dec.process.Stop(), 0);
@@ -222,6 +224,23 @@ TEST_F(DecoderProcess, HelloThenHeartbeatsThenContactsWithTheDecodersAccuracy) {
   ASSERT_TRUE(after.back().message.has_fault()) << after.back().message.DebugString();
   EXPECT_EQ(after.back().message.fault().code(), v1::PATCH_FAULT_CODE_SHUTTING_DOWN);
   EXPECT_TRUE(agg.WaitFor([&](const auto&) { return agg.streams_open() == 0; }, 2s));
+}
+
+// A model that refuses faint contacts says so where an operator looks: the hello's decoder config, the
+// decoder_info metric and the start-up line.
+TEST_F(DecoderProcess, AFaintRefusingModelSaysSoInTheHelloTheMetricsAndTheLog) {
+  AggregatorStub agg;
+  Sim sim = Sim::Start(Dir("sim"));
+  Decoder dec = Decoder::Start(Dir("dec"), sim.stream_port, agg.address(),
+                               {"--model", kSrc + "/config/models/forearm-field.rmodel"});
+  ASSERT_TRUE(agg.WaitFor([](const auto& r) { return !r.empty(); }, 10s)) << dec.process.stderr_text();
+  const auto first = agg.Snapshot().front().message;
+  ASSERT_TRUE(first.has_hello());
+  EXPECT_FLOAT_EQ(first.hello().decoder_config().faint_refuse_below_n(), 1.0f);
+  EXPECT_NE(Scrape(dec.metrics_port).find("faint_refuse_below_n=\"1.00\""), std::string::npos);
+  EXPECT_EQ(dec.process.Stop(), 0);
+  EXPECT_NE(dec.process.stderr_text().find("faint frames below 1.00 N refused (the model's)"), std::string::npos)
+      << dec.process.stderr_text();
 }
 
 TEST_F(DecoderProcess, MetricsPassPromtool) {

@@ -401,6 +401,11 @@ void ReportHeld(const std::vector<HeldCase>& cases, std::size_t held, int* lost,
 
 // The property: a baseline error the decoder holds without its stale clock must not turn a press that stops
 // into one that does not (flag only, the same error FAULTs the patch after max_frozen_s: a STOP).
+// After the fix (the stale clock runs while faint frames are refused) no error is held past max_frozen_s
+// (ABaselineErrorThatHidesAStopDoesNotOutlastMaxFrozenWithoutAFault passes), but this sweep presses 40 s after
+// the error, inside max_frozen_s: it still loses 128 of 680 stops, and flag only loses the same ones (the
+// baseline is the same frozen baseline in both modes; refusal changes only what frames below 1 N report).
+// An open finding of the decoder, not of the refusal: a sub-pm baseline error at the weak sites.
 TEST(FaintRefusalReview, DISABLED_ABaselineErrorHeldWithoutAStaleClockNeverLosesAStop) {
   std::size_t held = 0;
   const auto cases = HeldErrorSweep(FieldScene(), FieldModel(), 60, &held);
@@ -471,7 +476,7 @@ TEST(FaintRefusalReview, ALongLightPressRaisedToAStopHoldsTheRobotRefusingOrNot)
 // every frame of the error is refused, the baseline is held with its stale clock paused, nothing is reported
 // for 30 min, and the press reads 0.6 N: no STOP. The property: a baseline error that hides a stop does not
 // outlast max_frozen_s without a FAULT.
-TEST(FaintRefusalReview, DISABLED_ABaselineErrorThatHidesAStopDoesNotOutlastMaxFrozenWithoutAFault) {
+TEST(FaintRefusalReview, ABaselineErrorThatHidesAStopDoesNotOutlastMaxFrozenWithoutAFault) {
   const double quiet_s = std::getenv("HOLD_S") ? std::atof(std::getenv("HOLD_S")) : 1800.0;
   const auto sites = WeakSites();
   const patch::SurfacePoint at = sites[0].second;  // wrist edge at FBG 16

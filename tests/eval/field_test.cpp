@@ -326,30 +326,30 @@ TEST(ShippedModelField, PressesAtAGratingAreNotFlaggedAndAtTheEdgeNotSuppressed)
   }
 }
 
-// faint_refuse (off by default) ends finding 1(a)'s latch: a grating left 1 pm low (a press absorbed, then
-// released) reads as a contact, the gate freezes the baseline and after 300 s it is stale for good. Refused,
-// the baseline holds without its stale clock running: no stale frame. The offset is not absorbed (the
-// baseline does not track it), so the frames the networks read at 1 N or more (noise on the 0.57 N the
-// offset reads, or whose smoothed shifts noise lifts above the faint level) are still contacts.
-TEST(ShippedModelField, RefusedFaintFramesEndTheLatchOfAPicometre) {
+// faint_refuse does not end finding 1(a)'s latch, and must not: a grating left 1 pm low (a press absorbed, then
+// released) reads as a contact, the gate freezes the baseline and after 300 s it is stale (a FAULT, the arm
+// stopped until a re-tare). Refused, the frames below 1 N are no contact, yet the gate stays open and the
+// stale clock runs, so the same FAULT comes (review 7: pausing the clock let such an error hide a 2.25 N press
+// with no FAULT; letting the baseline track ate a held light press). No faint frame below 1 N is a contact.
+TEST(ShippedModelField, RefusedFaintFramesStillFaultABaselineLeftAPicometreOff) {
   const auto wl = OneGratingOff(15, -1.0, 500, 500 + 40000, 7);
   decode::PipelineConfig off, refuse;
   off.faint_pm = 0.0;
   refuse.faint_refuse = true;
-  const Frames latched = DecodeFrames(FieldModel(), off, wl), held = DecodeFrames(FieldModel(), refuse, wl);
+  const Frames latched = DecodeFrames(FieldModel(), off, wl), refused = DecodeFrames(FieldModel(), refuse, wl);
   const auto count = [](const std::vector<bool>& v, std::size_t from) {
     return static_cast<std::size_t>(std::count(v.begin() + static_cast<std::ptrdiff_t>(from), v.end(), true));
   };
-  EXPECT_GT(count(latched.stale, 500), 1000u) << "the latch this test is about no longer happens without the rule";
-  EXPECT_EQ(count(held.stale, 500), 0u);
+  const std::size_t stale_off = count(latched.stale, 500), stale_refused = count(refused.stale, 500);
+  std::printf("-1 pm on FBG 16 for 400 s: stale frames flag only %zu, refusing %zu; contact frames refusing %zu\n",
+              stale_off, stale_refused, count(refused.contact, 500));
+  EXPECT_GT(stale_off, 1000u) << "the latch this test is about no longer happens";
+  EXPECT_GT(stale_refused, stale_off - 500) << "refusing must FAULT as flag only does (within 5 s)";
   std::size_t light = 0;
-  for (std::size_t k = 500; k < held.contact.size(); ++k) {
-    light += held.contact[k] && held.faint[k] && held.force[k] < refuse.faint_max_n;
+  for (std::size_t k = 500; k < refused.contact.size(); ++k) {
+    light += refused.contact[k] && refused.faint[k] && refused.force[k] < refuse.faint_max_n;
   }
   EXPECT_EQ(light, 0u) << "faint contact frames below faint_max_n";
-  const std::size_t contacts = count(held.contact, 500);
-  std::printf("-1 pm on FBG 16 for 400 s, faint frames refused: %zu contact frames (read at 1 N or more, or not faint)\n", contacts);
-  EXPECT_LT(contacts, wl.size() / 20) << "most of the offset's frames are refused";
 }
 
 // The 120 s press through the field scene (viscoelastic cover, temperature history): the decoded

@@ -273,6 +273,33 @@ v1::HelloRefusal Core::CheckHello(std::size_t patch, const v1::PatchHello& h, st
               "; the scene expects " + in.decoder_config_sha256;
     return v1::HELLO_REFUSAL_CONFIG_MISMATCH;
   }
+  // A decoder that refuses faint contacts below some force never lets this aggregator judge them. A scene
+  // that pins the model was checked at load (CoverageOfScene: the threshold, the stop rule and the model's sd,
+  // seams). Unpinned, only what the hello says is known: refused below the region's threshold with the force
+  // alone, and not at all under a raising stop rule (the model's sd is unknown) or on a seam (a seam contact
+  // is judged on both sides' sum).
+  const float refuse_n = h.decoder_config().faint_refuse_below_n();
+  if (!(std::isfinite(refuse_n) && refuse_n >= 0.0f)) {
+    message = "patch '" + id + "': faint_refuse_below_n " + std::to_string(refuse_n) + " is not a force";
+    return v1::HELLO_REFUSAL_CONFIG_MISMATCH;
+  }
+  if (refuse_n > 0.0f && want.model_sha256.empty()) {
+    float allowed = 0.0f;
+    for (const auto& r : setup_.safety.regions) {
+      if (r.name == setup_.safety.patches[patch].region) allowed = r.threshold_n;
+    }
+    if (setup_.safety.stop_rule.sd_k > 0.0f) allowed = 0.0f;
+    for (const auto& sb : setup_.seams) {
+      if (sb.seam.a == patch || sb.seam.b == patch) allowed = 0.0f;
+    }
+    if (refuse_n > allowed) {
+      message = "patch '" + id + "': the decoder refuses faint contacts below " + std::to_string(refuse_n) +
+                " N, but this patch may stop on less (" + std::to_string(allowed) +
+                " N: its region's threshold, 0 under a raising stop rule or on a seam); pin the model in the scene or "
+                "run a model that does not refuse";
+      return v1::HELLO_REFUSAL_CONFIG_MISMATCH;
+    }
+  }
   return v1::HELLO_REFUSAL_UNSPECIFIED;
 }
 

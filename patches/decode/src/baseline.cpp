@@ -271,7 +271,7 @@ void BaselineTracker::Advance(const Wavelengths& wl, const ShiftsPm& shift, Gate
       quiet_frames_ = max_abs < config_.touch_off_pm ? quiet_frames_ + 1 : 0;
       if (quiet_frames_ >= config_.release_frames) state_ = State::kTracking;
     }
-  } else if (gate == Gate::kOpen || gate == Gate::kHold) {
+  } else if (gate == Gate::kOpen) {
     state_ = State::kFrozen;
     quiet_frames_ = 0;
   } else if (state_ == State::kFrozen && ++quiet_frames_ >= config_.release_frames) {
@@ -284,7 +284,7 @@ void BaselineTracker::Advance(const Wavelengths& wl, const ShiftsPm& shift, Gate
       if (std::isfinite(wl[i]) && std::isfinite(baseline_nm_[i])) baseline_nm_[i] += alpha * (wl[i] - baseline_nm_[i]);
     }
   } else {
-    if (gate != Gate::kHold) ++frozen_frames_;
+    ++frozen_frames_;
     if (common_mode_pm_ != 0.0f) {  // follow the uniform drift under the touch
       const double beta = std::min(1.0, 1.0 / (config_.common_mode_tau_s * config_.sample_rate_hz));
       for (std::size_t i = 0; i < kGratings; ++i) {

@@ -377,7 +377,6 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
     d.contact_ = true;
     d.over_range_ = true;
     d.gate_ = true;
-    d.hold_ = false;
     return out;
   };
   const bool have_baseline = d.tracker_.state() != BaselineTracker::State::kCapturing;
@@ -396,9 +395,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
 
   ShiftsPm shift;
   using Gate = BaselineTracker::Gate;
-  const Gate gate = !config_.freeze_on_gate ? Gate::kNone
-                    : d.gate_                 ? (d.hold_ ? Gate::kHold : Gate::kOpen)
-                                              : Gate::kClosed;
+  const Gate gate = !config_.freeze_on_gate ? Gate::kNone : (d.gate_ ? Gate::kOpen : Gate::kClosed);
   if (d.tracker_.state() == BaselineTracker::State::kCapturing) {
     d.tracker_.Update(wl, shift, gate);
     return invalid(Reason::kCapturing);
@@ -424,7 +421,6 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   // gate keeps driving the baseline, so the fault clears itself once the gate lets go.
   if (d.tracker_.stale()) {
     d.gate_ = o.in_contact;
-    d.hold_ = false;
     d.open_run_ = 0;
     d.contact_ = false;
     return invalid(Reason::kBaselineStale);
@@ -434,19 +430,17 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   out.reason = Reason::kOk;
   out.force_n = o.force_n;
   d.gate_ = o.in_contact;
-  d.hold_ = false;
   d.open_run_ = o.in_contact ? d.open_run_ + 1 : 0;
-  // Shifts a baseline error gives as well: flagged. With faint_refuse, below faint_max_n no contact, and the
-  // baseline holds without its stale clock running (kHold): a faint baseline error no longer latches into a
-  // stale FAULT, and a real light press is never absorbed (letting the baseline track instead ate a held
-  // 0.9 N press, so that raised to 2.25 N it read 1.2 N: tests/eval/field_test.cpp).
+  // Shifts a baseline error gives as well: flagged. With faint_refuse, below faint_max_n no contact; the gate
+  // stays open, so the baseline stays frozen and its stale clock runs. Letting the baseline track instead ate
+  // a held 0.9 N press (raised to 2.25 N it read 1.2 N); pausing the clock let a -0.8 pm error hide a 2.25 N
+  // press with no FAULT for good (review 7). Both are tested (tests/eval/field_test.cpp, faint_review_test.cpp).
   bool refused = false;
   if (Faint(shift, d) && o.in_contact) {
     out.faint = true;
     ++d.counters_.faint;
     if (*config_.faint_refuse && o.force_n < config_.faint_max_n) {
       refused = true;
-      d.hold_ = true;
       d.open_run_ = 0;
     }
   }

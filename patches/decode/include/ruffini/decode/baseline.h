@@ -93,12 +93,10 @@ class BaselineTracker {
 
   enum class State : std::uint8_t { kCapturing, kTracking, kFrozen };
 
-  enum class Gate : std::uint8_t { kNone, kClosed, kOpen, kHold };
+  enum class Gate : std::uint8_t { kNone, kClosed, kOpen };
   // Feeds one frame; writes shifts (pm, NaN where the peak is missing or no baseline yet), common mode
   // removed when configured. gate = kNone: shift-driven freeze; kOpen / kClosed: the decoder's force gate
-  // (on the previous frame) drives it. kHold: frozen as kOpen, but the stale clock does not run (a faint
-  // contact the pipeline refused: every shift below the faint level, which bounds how far a frozen baseline
-  // can be off while it lasts; PipelineConfig::faint_refuse). Returns true when the shifts are usable (a baseline exists).
+  // (on the previous frame) drives it. Returns true when the shifts are usable (a baseline exists).
   bool Update(const Wavelengths& wavelength_nm, ShiftsPm& shift_pm, Gate gate = Gate::kNone) noexcept;
   // Update() in two steps, so a caller can look at the shifts before the frame moves the baseline (the
   // pipeline refuses out-of-range frames without letting them in): Measure() writes the shifts and the

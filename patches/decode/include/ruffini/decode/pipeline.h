@@ -106,9 +106,10 @@ struct PipelineConfig {
   // reads as up to 1 N, and it must, because a real 1-2 N press at the wrist edge moves FBG 16 alone by
   // -1 to -1.7 pm (docs/experiments/one-grating.md). So by default the flag changes nothing else: the
   // contact and its force stand. faint_refuse: a flagged frame whose networks' force is below faint_max_n is
-  // no contact (force 0); the baseline holds as under a contact but its stale clock does not run (the faint
-  // level bounds how far it can be off meanwhile), so a faint baseline error no longer latches into a stale
-  // FAULT and a light press is never absorbed (docs/experiments/field-hours.md). A frame
+  // no contact (force 0); the baseline stays frozen as under any contact, and its stale clock runs, so a
+  // light press is never absorbed and a baseline error that lasts still FAULTs after max_frozen_s (letting
+  // the baseline track ate a held press; pausing the clock let a sub-pm error hide a 2.25 N press for good,
+  // review 7: docs/reviews/faint-refusal.md). What it buys: fewer false contacts. A frame
   // at or above faint_max_n is never refused: that mode never lowers a stop at a threshold of faint_max_n or
   // more (with sd_k <= 0; the aggregator refuses a scene where it could). Unset, the model decides
   // (Preprocessing.faint_refuse_below_n > 0: on, at that force; the pipeline's config() then holds the
@@ -181,7 +182,6 @@ class Pipeline {
     int invalid_run_ = 0;   // consecutive invalid frames since the last valid one
     int open_run_ = 0;      // consecutive valid frames with the force gate open
     bool gate_ = false;     // the decoder's force gate (drives the baseline)
-    bool hold_ = false;     // gate_ open on a refused faint frame: the baseline holds, its stale clock paused
     bool contact_ = false;  // the reported contact (the gate, confirmed)
     bool over_range_ = false;  // the last frame was over range
     float recent_peak_pm_ = 0.0f;  // largest |shift| lately, decaying (quiet release after a drop)
@@ -204,7 +204,7 @@ class Pipeline {
     d.primed_ = true;
     d.invalid_run_ = 0;
     d.open_run_ = 0;
-    d.gate_ = d.hold_ = d.contact_ = d.over_range_ = false;
+    d.gate_ = d.contact_ = d.over_range_ = false;
     d.recent_peak_pm_ = 0.0f;
     d.pair_age_ = 1 << 30;
     d.place_y_mm_ = d.place_a_mm_ = BaselineTracker::kNoPlace;
