@@ -1028,6 +1028,43 @@ TEST_F(CoreTest, ContactSetTimeAndHelloExpectations) {
   EXPECT_EQ(hello(1000.2, std::string(64, 'a')), v1::HELLO_REFUSAL_UNSPECIFIED);
 }
 
+// A hello's faint refusal (DecoderConfig.faint_refuse_below_n). A pinned model was checked when the scene
+// loaded; unpinned, the aggregator refuses a decoder that refuses above what the patch may stop on: its
+// region's threshold with the force alone, nothing under a raising stop rule or on a seam. A value that is not
+// a force is refused whatever the scene pins.
+TEST(CoreHello, AFaintRefusalIsCheckedAgainstWhatThePatchMayStopOn) {
+  auto run = [](aggregate::Setup setup, float refuse_n) {
+    aggregate::Core c(setup, kT0);
+    v1::PatchMessage m = Hello(setup, 0);
+    m.mutable_hello()->mutable_decoder_config()->set_faint_refuse_below_n(refuse_n);
+    const int st = c.OpenStream(kT0);
+    const auto r = ruffini::testing::Deliver(c, st, m, kT0);
+    return r.command->has_hello_accepted() ? v1::HELLO_REFUSAL_UNSPECIFIED : r.command->hello_refused().reason();
+  };
+  aggregate::Setup unpinned = CobotSetup();
+  for (auto& p : unpinned.patches) p.model_sha256.clear();
+  float threshold = 0;
+  for (const auto& r : unpinned.safety.regions) {
+    if (r.name == unpinned.safety.patches[0].region) threshold = r.threshold_n;
+  }
+  ASSERT_GT(threshold, 0.5f);
+  ASSERT_TRUE(unpinned.seams.empty()) << "CobotSetup finds no seams; the seam case below adds one";
+  EXPECT_EQ(run(unpinned, 0.0f), v1::HELLO_REFUSAL_UNSPECIFIED);
+  EXPECT_EQ(run(unpinned, threshold - 0.1f), v1::HELLO_REFUSAL_UNSPECIFIED);
+  EXPECT_EQ(run(unpinned, threshold + 0.1f), v1::HELLO_REFUSAL_CONFIG_MISMATCH);
+  for (float bad : {-0.5f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    EXPECT_EQ(run(unpinned, bad), v1::HELLO_REFUSAL_CONFIG_MISMATCH) << bad;
+    EXPECT_EQ(run(CobotSetup(), bad), v1::HELLO_REFUSAL_CONFIG_MISMATCH) << "pinned, " << bad;
+  }
+  EXPECT_EQ(run(CobotSetup(), threshold + 0.1f), v1::HELLO_REFUSAL_UNSPECIFIED) << "pinned: checked at load";
+  aggregate::Setup raising = unpinned;
+  raising.safety.stop_rule.sd_k = 1.0f;
+  EXPECT_EQ(run(raising, threshold - 0.1f), v1::HELLO_REFUSAL_CONFIG_MISMATCH);
+  aggregate::Setup seamed = unpinned;
+  seamed.seams.push_back({robot::Seam{0, 1}, 10.0, 10.0});
+  EXPECT_EQ(run(seamed, threshold - 0.1f), v1::HELLO_REFUSAL_CONFIG_MISMATCH);
+}
+
 // Issue 15 section 2 through the Core: a contact hovering at the threshold for 0.75 s (frames at 1 kHz,
 // crossing every 25 ms) opens one epoch with the scene's release settings (old code: 30).
 TEST_F(CoreTest, AContactHoveringAtTheThresholdOpensOneEpoch) {

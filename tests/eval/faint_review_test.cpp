@@ -403,8 +403,9 @@ void ReportHeld(const std::vector<HeldCase>& cases, std::size_t held, int* lost,
 // into one that does not (flag only, the same error FAULTs the patch after max_frozen_s: a STOP).
 // After the fix (the stale clock runs while faint frames are refused) no error is held past max_frozen_s
 // (ABaselineErrorThatHidesAStopDoesNotOutlastMaxFrozenWithoutAFault passes), but this sweep presses 40 s after
-// the error, inside max_frozen_s: it still loses 128 of 680 stops, and flag only loses the same ones (the
-// baseline is the same frozen baseline in both modes; refusal changes only what frames below 1 N report).
+// the error, inside max_frozen_s: it still loses 128 of 680 stops; flag only must lose the same ones by
+// construction, not measured separately (the same frozen baseline in both modes; refusal changes only what
+// frames below 1 N report).
 // An open finding of the decoder, not of the refusal: a sub-pm baseline error at the weak sites.
 TEST(FaintRefusalReview, DISABLED_ABaselineErrorHeldWithoutAStaleClockNeverLosesAStop) {
   std::size_t held = 0;
