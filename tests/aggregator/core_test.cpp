@@ -539,6 +539,8 @@ TEST_F(CoreSeam, AProbeOnTheSeamIsJudgedOnBothSidesForces) {
   EXPECT_NE(st.cause().message().find("force 1.8 N (seam sum of 'forearm_b' 0.9 N and 'forearm_a' 0.9 N)"),
             std::string::npos)
       << st.cause().message();
+  // ... and names the partner in a field a client can read without parsing text (the demo's check does).
+  EXPECT_EQ(st.cause().seam_partner_patch_id(), "forearm_a");
 }
 
 // A STOP on one side's own force names no seam sum, even with a live contact across the seam.
@@ -549,6 +551,7 @@ TEST_F(CoreSeam, AStopOnItsOwnForceNamesNoSum) {
   ASSERT_EQ(st.state(), v1::SafetyState::STATE_STOP);
   EXPECT_FLOAT_EQ(st.cause().force_n(), 2.0f);
   EXPECT_EQ(st.cause().message().find("seam sum"), std::string::npos) << st.cause().message();
+  EXPECT_EQ(st.cause().seam_partner_patch_id(), "");
   EXPECT_EQ(core.counters().seam_sums, 0u);
 }
 

@@ -814,6 +814,9 @@ v1::SafetyState Core::SafetyState() const {
     c->mutable_p_bc_m()->set_z((*s.cause.p_bc_m)[2]);
   }
   c->set_patch_fault(static_cast<v1::PatchFaultCode>(s.cause.patch_fault));
+  if (s.cause.kind == safety::CauseKind::kContact && s.cause.seam_partner != safety::kNoPatch) {
+    c->set_seam_partner_patch_id(std::string(policy_.patch_id(s.cause.seam_partner)));
+  }
   if (s.cause.kind != safety::CauseKind::kNone) c->set_message(safety::Describe(policy_, s.cause));
   c->set_t_ns(s.cause.t_ns);
   return out;

@@ -557,10 +557,14 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     }
     return v;
   };
+  // The STOP's cause is on the pressed patch, or is a seam sum with it: a press near a seam is read by both
+  // patches, and whichever frame crosses first names its own patch with the pressed one as partner.
   const auto cause_on = [](const std::string& patch) {
     return [patch](const SafetyRecord& r, std::string& detail) {
-      detail = "cause patch " + r.state.cause().patch_id();
-      return r.state.cause().patch_id() == patch;
+      const auto& c = r.state.cause();
+      detail = "cause patch " + c.patch_id();
+      if (!c.seam_partner_patch_id().empty()) detail += " (seam sum with " + c.seam_partner_patch_id() + ")";
+      return c.patch_id() == patch || c.seam_partner_patch_id() == patch;
     };
   };
   const std::string fa = patches[0], fb = patches.size() > 1 ? patches[1] : patches[0];
