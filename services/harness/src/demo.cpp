@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -62,7 +63,9 @@ struct SetRecord {
   std::map<std::string, int> per_link;
 };
 
-// The demo's own subscriber: WatchSafety and WatchContacts, recorded with arrival times.
+// The demo's own subscriber: WatchSafety and WatchContacts, recorded with arrival times. Like a controller, it
+// opens a stream again when the aggregator ends it (the aggregator drops a subscriber whose write is stuck for
+// more than 50 ms: a starved machine), and counts each time; only Stop() ends it for good.
 class Observer {
  public:
   Observer(const std::string& address, const std::shared_ptr<grpc::ChannelCredentials>& credentials) {
@@ -73,48 +76,69 @@ class Observer {
     channel_ = grpc::CreateCustomChannel(address, credentials, args);
     stub_ = v1::Aggregator::NewStub(channel_);
     safety_ = std::thread([this] {
-      v1::WatchSafetyRequest req;
-      req.set_subscriber("ruffini demo");
-      auto r = stub_->WatchSafety(&safety_ctx_, req);
-      v1::SafetyState s;
-      while (r->Read(&s)) {
-        std::lock_guard lock(mu_);
-        safety_log_.push_back({s, service::UnixNowNs()});
+      for (;;) {
+        auto ctx = Open(safety_ctx_);
+        if (!ctx) return;
+        v1::WatchSafetyRequest req;
+        req.set_subscriber("ruffini demo");
+        auto r = stub_->WatchSafety(ctx.get(), req);
+        v1::SafetyState s;
+        bool read = false;
+        while (r->Read(&s)) {
+          read = true;
+          safety_ended_ = false;
+          std::lock_guard lock(mu_);
+          safety_log_.push_back({s, service::UnixNowNs()});
+        }
+        r->Finish();
+        safety_ended_ = true;
+        if (read) ++safety_streams_;
+        if (!Pause()) return;
       }
-      r->Finish();
-      safety_ended_ = true;
     });
     contacts_ = std::thread([this] {
-      v1::WatchContactsRequest req;
-      req.set_subscriber("ruffini demo");
-      auto r = stub_->WatchContacts(&contacts_ctx_, req);
-      v1::ContactSet set;
-      while (r->Read(&set)) {
-        const std::int64_t now = service::UnixNowNs();
-        std::lock_guard lock(mu_);
-        SetRecord sr;
-        sr.arrival_ns = now;
-        for (const auto& c : set.contacts()) ++sr.per_link[c.link()];
-        sets_.push_back(std::move(sr));
-        for (const auto& c : set.contacts()) {
-          const std::string patch = c.patch_ids_size() > 0 ? c.patch_ids(0) : "";
-          const auto key = std::make_pair(patch, c.t_ns());
-          if (!seen_.insert(key).second) continue;
-          contact_log_.push_back({patch, c.patch_ids_size(), c.link(), c.force_n(), c.t_ns(), now, c.located(),
-                                  c.p_bc_m().x(), c.p_bc_m().y(), c.p_bc_m().z(), c.p_lc_m().x(), c.p_lc_m().y(),
-                                  c.p_lc_m().z(), c.multiple()});
+      for (;;) {
+        auto ctx = Open(contacts_ctx_);
+        if (!ctx) return;
+        v1::WatchContactsRequest req;
+        req.set_subscriber("ruffini demo");
+        auto r = stub_->WatchContacts(ctx.get(), req);
+        v1::ContactSet set;
+        while (r->Read(&set)) {
+          const std::int64_t now = service::UnixNowNs();
+          std::lock_guard lock(mu_);
+          SetRecord sr;
+          sr.arrival_ns = now;
+          for (const auto& c : set.contacts()) ++sr.per_link[c.link()];
+          sets_.push_back(std::move(sr));
+          for (const auto& c : set.contacts()) {
+            const std::string patch = c.patch_ids_size() > 0 ? c.patch_ids(0) : "";
+            const auto key = std::make_pair(patch, c.t_ns());
+            if (!seen_.insert(key).second) continue;
+            contact_log_.push_back({patch, c.patch_ids_size(), c.link(), c.force_n(), c.t_ns(), now, c.located(),
+                                    c.p_bc_m().x(), c.p_bc_m().y(), c.p_bc_m().z(), c.p_lc_m().x(), c.p_lc_m().y(),
+                                    c.p_lc_m().z(), c.multiple()});
+          }
         }
+        r->Finish();
+        if (!Pause()) return;
       }
-      r->Finish();
     });
   }
   ~Observer() { Stop(); }
   void Stop() {
-    safety_ctx_.TryCancel();
-    contacts_ctx_.TryCancel();
+    {
+      std::lock_guard lock(ctx_mu_);
+      stopping_ = true;
+      if (safety_ctx_) safety_ctx_->TryCancel();
+      if (contacts_ctx_) contacts_ctx_->TryCancel();
+    }
+    stop_cv_.notify_all();
     if (safety_.joinable()) safety_.join();
     if (contacts_.joinable()) contacts_.join();
   }
+  // Streams the aggregator ended that the observer opened again and read from (0 on a run with no drop).
+  int safety_reopened() const { return std::max(0, safety_streams_.load() - 1); }
   std::vector<SafetyRecord> Safety() {
     std::lock_guard lock(mu_);
     return safety_log_;
@@ -154,9 +178,27 @@ class Observer {
   }
 
  private:
+  // A new context for the next stream (a context serves one call), kept where Stop() can cancel it; null once
+  // stopping.
+  std::shared_ptr<grpc::ClientContext> Open(std::shared_ptr<grpc::ClientContext>& slot) {
+    std::lock_guard lock(ctx_mu_);
+    if (stopping_) return nullptr;
+    slot = std::make_shared<grpc::ClientContext>();
+    return slot;
+  }
+  // 100 ms between a stream's end and the next try (the aggregator may be gone for good); false once stopping.
+  bool Pause() {
+    std::unique_lock lock(ctx_mu_);
+    return !stop_cv_.wait_for(lock, 100ms, [this] { return stopping_; });
+  }
+
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::Aggregator::Stub> stub_;
-  grpc::ClientContext safety_ctx_, contacts_ctx_;
+  std::mutex ctx_mu_;
+  std::condition_variable stop_cv_;
+  bool stopping_ = false;
+  std::shared_ptr<grpc::ClientContext> safety_ctx_, contacts_ctx_;
+  std::atomic<int> safety_streams_{0};  // WatchSafety streams that delivered a state
   std::thread safety_, contacts_;
   std::mutex mu_;
   std::vector<SafetyRecord> safety_log_;
@@ -1001,7 +1043,13 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
        << (e.pass ? "pass" : "**FAIL**") << " |\n";
   }
   md << "\n## Numbers\n\n"
-     << "- Safety states received: " << safety.size() << " (a heartbeat every 10 ms).\n"
+     << "- Safety states received: " << safety.size() << " (a heartbeat every 10 ms)"
+     << (observer.safety_reopened() > 0
+             ? "; the aggregator ended this subscriber's stream " + std::to_string(observer.safety_reopened()) +
+                   " time(s) (a write stuck over 50 ms: a starved machine) and it subscribed again, as a controller "
+                   "does"
+             : std::string())
+     << ".\n"
      << "- Contact frames received (WatchContacts): " << contacts.size() << "; frame (the interrogator's "
      << "timestamp) to body contact at this subscriber: p50 " << Fmt("%.3f", q(0.5)) << " ms, p99 "
      << Fmt("%.3f", q(0.99)) << " ms.\n"
