@@ -67,6 +67,7 @@ TEST(SceneFile, TheFieldScenesAreTheCobotWithTheirOwnCastsModelsAndEffects) {
     }
   }
   EXPECT_EQ(dump(gradient["patches"]), dump(field["patches"]));
+  EXPECT_EQ(dump(gradient["safety"]), dump(field["safety"]));  // the same casts' maps, the same claim
   EXPECT_FALSE(field["twin"]["effects"]["temperature"]["gradient"]);
   ASSERT_TRUE(gradient["twin"]["effects"]["temperature"]["gradient"]);
   YAML::Node without = YAML::Clone(gradient["twin"]);

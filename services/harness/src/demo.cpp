@@ -90,9 +90,13 @@ class Observer {
           std::lock_guard lock(mu_);
           safety_log_.push_back({s, service::UnixNowNs()});
         }
-        r->Finish();
+        const grpc::Status status = r->Finish();
         safety_ended_ = true;
-        if (read) ++safety_streams_;
+        if (read) {
+          ++safety_streams_;
+          std::lock_guard lock(mu_);
+          safety_ends_.push_back({service::UnixNowNs(), status.error_message()});
+        }
         if (!Pause()) return;
       }
     });
@@ -104,7 +108,9 @@ class Observer {
         req.set_subscriber("ruffini demo");
         auto r = stub_->WatchContacts(ctx.get(), req);
         v1::ContactSet set;
+        bool read = false;
         while (r->Read(&set)) {
+          read = true;
           const std::int64_t now = service::UnixNowNs();
           std::lock_guard lock(mu_);
           SetRecord sr;
@@ -121,6 +127,7 @@ class Observer {
           }
         }
         r->Finish();
+        if (read) ++contact_streams_;
         if (!Pause()) return;
       }
     });
@@ -139,6 +146,13 @@ class Observer {
   }
   // Streams the aggregator ended that the observer opened again and read from (0 on a run with no drop).
   int safety_reopened() const { return std::max(0, safety_streams_.load() - 1); }
+  int contacts_reopened() const { return std::max(0, contact_streams_.load() - 1); }
+  // When each WatchSafety stream that delivered a state ended, and the status it ended with (the last one: the
+  // shutdown); a STOP that happened during a gap is seen when the next stream opens (a latched state).
+  std::vector<std::pair<std::int64_t, std::string>> SafetyEnds() {
+    std::lock_guard lock(mu_);
+    return safety_ends_;
+  }
   std::vector<SafetyRecord> Safety() {
     std::lock_guard lock(mu_);
     return safety_log_;
@@ -199,6 +213,8 @@ class Observer {
   bool stopping_ = false;
   std::shared_ptr<grpc::ClientContext> safety_ctx_, contacts_ctx_;
   std::atomic<int> safety_streams_{0};  // WatchSafety streams that delivered a state
+  std::atomic<int> contact_streams_{0};  // WatchContacts streams that delivered a set
+  std::vector<std::pair<std::int64_t, std::string>> safety_ends_;
   std::thread safety_, contacts_;
   std::mutex mu_;
   std::vector<SafetyRecord> safety_log_;
@@ -599,21 +615,33 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     }
     return v;
   };
-  // The STOP's cause is on the pressed patch, or is a seam sum with it: a press near a seam is read by both
-  // patches, and whichever frame crosses first names its own patch with the pressed one as partner.
-  const auto cause_on = [](const std::string& patch) {
-    return [patch](const SafetyRecord& r, std::string& detail) {
+  // The STOP's cause is on the pressed patch. A press near a seam is read by both patches, and the seam rule may
+  // judge the other patch's frame first, on the sum (the 50 N elbow-edge press can cross in forearm_a's frame):
+  // a STOP judged on a seam sum (in either patch's frame) counts only when the pressed patch's own reading also
+  // went above the threshold during the hold, so the event never passes on the other patch's share (review 8,
+  // finding 1).
+  const auto cause_on = [&](const std::string& patch, double from_s, double to_s) {
+    return [&, patch, from_s, to_s](const SafetyRecord& r, std::string& detail) {
       const auto& c = r.state.cause();
       detail = "cause patch " + c.patch_id();
-      if (!c.seam_partner_patch_id().empty()) detail += " (seam sum with " + c.seam_partner_patch_id() + ")";
-      return c.patch_id() == patch || c.seam_partner_patch_id() == patch;
+      if (c.patch_id() == patch && c.seam_partner_patch_id().empty()) return true;  // its own force alone
+      if (c.patch_id() != patch && c.seam_partner_patch_id() != patch) return false;
+      double own = 0;
+      for (const auto& k : hold_contacts(from_s, to_s, patch)) {
+        if (k.patches == 1) own = std::max(own, k.force_n);  // a body contact of this patch alone, not a fused one
+      }
+      const bool alone = own > threshold_n;
+      detail += " (a seam sum with " + (c.patch_id() == patch ? c.seam_partner_patch_id() : patch) + "; " + patch +
+                "'s own reading peaked at " + Fmt("%.2f", own) + " N" +
+                (alone ? ", above the threshold on its own too)" : ": only the seam sum stopped it)");
+      return alone;
     };
   };
   const std::string fa = patches[0], fb = patches.size() > 1 ? patches[1] : patches[0];
   const std::string ua = patches.size() > 2 ? patches[2] : patches[0];
   // 2.5 N in the middle of upper_arm_a (20.0 s, ramp 0.3 s).
   press_event("hard touch in the middle of " + ua + " (2.5 N)", "STOP", 20.0, 20.0 + 0.3 * threshold_n / 2.5, 21.6,
-              cause_on(ua));
+              cause_on(ua, 20.0, 21.6));
   // Two touches on forearm_a, 2 N each on FBG 1 and FBG 13 (24.0 s): the contact flagged `multiple`.
   // The delay counts from the touches' summed force crossing the threshold (the earliest reading of it).
   press_event("two touches on " + fa + " (2 N each, 82 mm apart)", "STOP; the contact flagged multiple", 24.0,
@@ -630,10 +658,11 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
               });
   // 50 N at forearm_b's elbow edge, 2 mm in, where the fibre enters (28.0 s): over range.
   press_event("50 N at " + fb + "'s elbow edge (Y 2 mm, R 18 deg)", "STOP (an over-range contact)", 28.0,
-              28.0 + 0.3 * threshold_n / 50.0, 29.6, cause_on(fb));
-  // 5 N 2 mm from forearm_b's free R edge (32.0 s); its map: reliable from 2.5 N there.
-  press_event("5 N at " + fb + "'s free edge (Y 40 mm, R 142 deg)", "STOP (the map: reliable from 2.5 N here)", 32.0,
-              32.0 + 0.3 * threshold_n / 5.0, 33.6, cause_on(fb));
+              28.0 + 0.3 * threshold_n / 50.0, 29.6, cause_on(fb, 28.0, 29.6));
+  // 5 N 2 mm from forearm_b's free R edge (32.0 s), inside the scene's accepted r145-edge band (not promised by
+  // the coverage check); the cast's map there: 3 N on the field scene (2.5 N on the lab's cast 0).
+  press_event("5 N at " + fb + "'s free edge (Y 40 mm, R 142 deg)", "STOP (the map: reliable from 2.5-3 N here)", 32.0,
+              32.0 + 0.3 * threshold_n / 5.0, 33.6, cause_on(fb, 32.0, 33.6));
   // A slow press in the middle of forearm_a: 0 to 3 N over 20 s (0.15 N/s), the threshold crossed at 46.0 s.
   press_event("slow press in the middle of " + fa + " (0 to 3 N over 20 s)",
               "STOP while the true force is within 15 % of the threshold", 36.0, 36.0 + 20.0 * threshold_n / 3.0, 57.0,
@@ -1042,17 +1071,30 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     md << "| " << Fmt("%.2f", e.t_s) << " | " << e.name << " | " << e.expected << " | " << e.observed << " | "
        << (e.pass ? "pass" : "**FAIL**") << " |\n";
   }
+  std::string safety_gaps;  // each stream end before the last, at its time, with gRPC's status message
+  {
+    const auto ends = observer.SafetyEnds();
+    for (std::size_t i = 0; i + 1 < ends.size(); ++i) {
+      safety_gaps += (safety_gaps.empty() ? "" : "; ") + Fmt("%.2f s", rel(ends[i].first)) + ": " +
+                     (ends[i].second.empty() ? std::string("ended by the aggregator") : ends[i].second);
+    }
+  }
   md << "\n## Numbers\n\n"
      << "- Safety states received: " << safety.size() << " (a heartbeat every 10 ms)"
-     << (observer.safety_reopened() > 0
-             ? "; the aggregator ended this subscriber's stream " + std::to_string(observer.safety_reopened()) +
-                   " time(s) (a write stuck over 50 ms: a starved machine) and it subscribed again, as a controller "
-                   "does"
-             : std::string())
+     << (observer.safety_reopened() > 0 ? "; the stream ended " + std::to_string(observer.safety_reopened()) +
+                                              " time(s) before the shutdown and the demo subscribed again, as a "
+                                              "controller does (" + safety_gaps + ")"
+                                        : std::string())
      << ".\n"
      << "- Contact frames received (WatchContacts): " << contacts.size() << "; frame (the interrogator's "
      << "timestamp) to body contact at this subscriber: p50 " << Fmt("%.3f", q(0.5)) << " ms, p99 "
-     << Fmt("%.3f", q(0.99)) << " ms.\n"
+     << Fmt("%.3f", q(0.99)) << " ms"
+     << (observer.contacts_reopened() > 0 ? "; the contact stream ended " +
+                                                std::to_string(observer.contacts_reopened()) +
+                                                " time(s) before the shutdown and was opened again (frames meanwhile "
+                                                "are missing from the contact checks)"
+                                          : std::string())
+     << ".\n"
      << "- Frame-to-stop at this subscriber: ";
   for (double v : stop_latency_ms) md << Fmt("%.3f", v) << " ms ";
   md << "(the first above-threshold frame's timestamp to the STOP's arrival).\n"
