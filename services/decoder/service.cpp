@@ -14,13 +14,13 @@
 #include <chrono>
 #include <filesystem>
 #include <mutex>
-#include <semaphore>
 #include <thread>
 
 #include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
 #include "ruffini/service/keepalive.h"
 #include "ruffini/service/process_metrics.h"
+#include "ruffini/service/semaphore.h"
 #include "ruffini/service/tls.h"
 #include "ruffini/ingest/hyperion.h"
 #include "ruffini/channel/checkers.h"
@@ -59,7 +59,7 @@ struct IngestItem {
 
 using IngestRing = boost::lockfree::spsc_queue<IngestItem, boost::lockfree::capacity<kIngestSlots>>;
 using MessageRing = boost::lockfree::spsc_queue<link::Message, boost::lockfree::capacity<kMessageSlots>>;
-using Semaphore = std::counting_semaphore<1 << 30>;
+using Semaphore = service::Semaphore;  // not std::counting_semaphore: see semaphore.h
 
 // ---------------------------------------------------------------------------------------------------------
 // Ingest: the interrogator's peak stream over TCP (Boost.Asio, one thread).

@@ -28,6 +28,9 @@ void RegisterDemoCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--out", o->out_dir, "Report folder (report.md, SVG figures, logs/)")->capture_default_str();
   cmd->add_option("--rate-hz", o->rate_hz, "Interrogator rate")->check(CLI::Range(100.0, 5000.0))->capture_default_str();
+  cmd->add_option("--joint-rate-hz", o->joint_rate_hz, "The controller's joint-state rate (a KUKA RSI cycle is 4 ms)")
+      ->check(CLI::Range(50.0, 5000.0))
+      ->capture_default_str();
   cmd->add_option("--tls-dir", o->tls_dir,
                   "Mutual TLS for every process (deploy/tls/make-dev-ca.sh DIR --scene SCENE; the demo is the "
                   "operator); default: every process --insecure on loopback")

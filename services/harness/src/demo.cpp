@@ -15,6 +15,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <functional>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -344,8 +345,9 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   HealthPoller health(observer, patches);
   // When the scripted causes of FAULT began and ended (Unix ns), for the time in FAULT per patch.
   std::int64_t killed_ns = 0, restarted_ns = 0, frozen_ns = 0, thawed_ns = 0;
-  log("aggregator on " + address + "; starting ruffini-controller (joint states at " + rate + " Hz)");
-  Child controller({exe("ruffini-controller"), transport, "--robot", scene.name, "--aggregator", address, "--rate-hz", rate},
+  const std::string joint_rate = std::to_string(static_cast<int>(o.joint_rate_hz));
+  log("aggregator on " + address + "; starting ruffini-controller (joint states at " + joint_rate + " Hz)");
+  Child controller({exe("ruffini-controller"), transport, "--robot", scene.name, "--aggregator", address, "--rate-hz", joint_rate},
                    (run / "controller").string());
   log("starting ruffini-sim (" + o.scenario_path + ", " + rate + " Hz)");
   Child sim({exe("ruffini-sim"), "--scene", o.scene_path, "--scenario", o.scenario_path, "--rate-hz", rate,
@@ -405,6 +407,35 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     }
     return std::nullopt;
   };
+  // Each event is judged on the cause it expects, latched in a STOP or a FAULT (both halt the robot): a FAULT
+  // the script did not cause (on this VM, a process the host did not run for 15-30 ms: docs/demo.md, "FAULTs
+  // nobody caused") is the safe side, and the aggregator still latches every new cause in its own epoch while
+  // it holds (safety.new_epoch_per_cause), so the expected cause, or a contact that must not be there, is seen
+  // whatever else latched. The other causes are named in the report.
+  using CausePred = std::function<bool(const v1::SafetyCause&)>;
+  auto first_cause_after = [&](std::int64_t since_ns, const CausePred& pred) {
+    return first_after(since_ns, [&](const v1::SafetyState& s) {
+      return s.state() != v1::SafetyState::STATE_CLEAR && pred(s.cause());
+    });
+  };
+  auto is_contact = [](const v1::SafetyCause& c) { return c.kind() == v1::SafetyCause::KIND_CONTACT; };
+  // The causes of the epochs that arrived in [since_ns, until_ns) and that `expected` does not match.
+  auto other_causes = [&](std::int64_t since_ns, std::int64_t until_ns, const CausePred& expected) {
+    std::set<std::uint64_t> epochs;
+    std::string text;
+    int more = 0;
+    for (const auto& r : observer.Safety()) {
+      if (r.arrival_ns < since_ns || r.arrival_ns >= until_ns || r.state.state() == v1::SafetyState::STATE_CLEAR) continue;
+      if (expected(r.state.cause()) || !epochs.insert(r.state.stop_epoch()).second) continue;
+      if (epochs.size() > 3) {
+        ++more;
+        continue;
+      }
+      text += (text.empty() ? "" : ", ") + std::string(StateName(r.state.state())) + " " + r.state.cause().message();
+    }
+    if (more > 0) text += " and " + std::to_string(more) + " more";
+    return text;
+  };
 
   // 1. Start-up: FAULT until every patch is healthy, then an operator reset.
   {
@@ -424,15 +455,22 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     const double startup_done_s = t_s();
     const std::int64_t from = service::UnixNowNs();
     sleep_until(6.5);
-    Event e{"light touch on forearm_a (0.7 N, threshold 1.5 N)", "no STOP, no FAULT", t_s(), false, ""};
-    const auto bad = first_after(from, [](const v1::SafetyState& s) { return s.state() != v1::SafetyState::STATE_CLEAR; });
+    Event e{"light touch on forearm_a (0.7 N, threshold 1.5 N)", "no contact latched (no STOP)", t_s(), false, ""};
+    const std::int64_t until = service::UnixNowNs();
+    // A STOP state always carries a contact cause; matched on the state too, in case one ever did not.
+    const auto bad = first_after(from, [&](const v1::SafetyState& s) {
+      return s.state() == v1::SafetyState::STATE_STOP || (s.state() != v1::SafetyState::STATE_CLEAR && is_contact(s.cause()));
+    });
     double peak = 0;
     for (const auto& c : observer.Contacts()) {
       if (c.arrival_ns >= from && c.patch == patches[0]) peak = std::max(peak, c.force_n);
     }
+    const std::string others = other_causes(from, until, is_contact);
     e.pass = !bad && peak > 0.2;
     e.observed = bad ? std::string(StateName(bad->state.state())) + ": " + bad->state.cause().message()
-                     : "stayed CLEAR; the touch was felt (peak " + Fmt("%.2f", peak) + " N on " + patches[0] + ")";
+                     : std::string(others.empty() ? "stayed CLEAR" : "no contact latched") + "; the touch was felt (peak " +
+                           Fmt("%.2f", peak) + " N on " + patches[0] + ")";
+    if (!bad && !others.empty()) e.observed += "; meanwhile " + others + " (not the touch)";
     // The script runs on the sim's clock from its start; a start-up slower than the first press (a starved
     // machine) leaves this step nothing to judge. Still a failure, named as what it is.
     constexpr double kTouchStarts_s = 4.0;
@@ -449,21 +487,22 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     Event e{"one probe on the forearm seam (20 N, shared by both patches)", "STOP (contact above 1.5 N)", 0, false, ""};
     std::optional<SafetyRecord> stop;
     WaitUntil([&] {
-      stop = first_after(from, [](const v1::SafetyState& s) { return s.state() != v1::SafetyState::STATE_CLEAR; });
+      stop = first_cause_after(from, is_contact);
       return stop.has_value() || t_s() > 9.0;
     }, 10s, 2ms);
     e.t_s = t_s();
     if (stop) {
       const auto& c = stop->state.cause();
       const double ms = static_cast<double>(stop->arrival_ns - c.t_ns()) / 1e6;
-      e.pass = stop->state.state() == v1::SafetyState::STATE_STOP && c.kind() == v1::SafetyCause::KIND_CONTACT &&
-               c.link() == "forearm_link";
+      e.pass = c.link() == "forearm_link";
       e.observed = std::string(StateName(stop->state.state())) + " epoch " + std::to_string(stop->state.stop_epoch()) +
                    ": " + c.message() + "; frame-to-stop at this subscriber " + Fmt("%.3f", ms) + " ms";
       if (e.pass) stop_latency_ms.push_back(ms);
     } else {
-      e.observed = "no STOP";
+      e.observed = "no contact latched";
     }
+    const std::string others = other_causes(from, service::UnixNowNs(), is_contact);
+    if (!others.empty()) e.observed += "; meanwhile " + others;
     record(e);
   }
   // 4. Released: an authorized reset clears it.
@@ -483,19 +522,26 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     const std::int64_t killed_at = service::UnixNowNs();
     killed_ns = killed_at;
     decoders[killed_patch]->Signal(SIGKILL);
+    const CausePred killed_cause = [&](const v1::SafetyCause& c) {
+      return c.kind() != v1::SafetyCause::KIND_CONTACT && c.patch_id() == killed_patch;
+    };
     std::optional<SafetyRecord> fault;
     WaitUntil([&] {
-      fault = first_after(killed_at, [](const v1::SafetyState& s) { return s.state() == v1::SafetyState::STATE_FAULT; });
+      fault = first_after(killed_at, [&](const v1::SafetyState& s) {
+        return s.state() == v1::SafetyState::STATE_FAULT && killed_cause(s.cause());
+      });
       return fault.has_value();
     }, 2s);
     e.t_s = t_s();
     if (fault) {
       const double ms = static_cast<double>(fault->arrival_ns - killed_at) / 1e6;
-      e.pass = ms <= 50.0 && fault->state.cause().patch_id() == killed_patch;
+      e.pass = ms <= 50.0;
       e.observed = "FAULT after " + Fmt("%.2f", ms) + " ms: " + fault->state.cause().message();
     } else {
-      e.observed = "no FAULT within 2 s";
+      e.observed = "no FAULT naming " + killed_patch + " within 2 s";
     }
+    const std::string others = other_causes(killed_at, service::UnixNowNs(), killed_cause);
+    if (!others.empty()) e.observed += "; meanwhile " + others;
     record(e);
   }
   // 6. It restarts: healthy again, then a reset clears.
@@ -516,19 +562,24 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     const std::int64_t frozen_at = service::UnixNowNs();
     frozen_ns = frozen_at;
     controller.Signal(SIGSTOP);
+    const CausePred stale = [](const v1::SafetyCause& c) { return c.kind() == v1::SafetyCause::KIND_JOINT_STATES_STALE; };
     std::optional<SafetyRecord> fault;
     WaitUntil([&] {
-      fault = first_after(frozen_at, [](const v1::SafetyState& s) { return s.state() == v1::SafetyState::STATE_FAULT; });
+      fault = first_after(frozen_at, [&](const v1::SafetyState& s) {
+        return s.state() == v1::SafetyState::STATE_FAULT && stale(s.cause());
+      });
       return fault.has_value();
     }, 2s);
     e.t_s = t_s();
     if (fault) {
       const double ms = static_cast<double>(fault->arrival_ns - frozen_at) / 1e6;
-      e.pass = ms <= 100.0 && fault->state.cause().kind() == v1::SafetyCause::KIND_JOINT_STATES_STALE;
+      e.pass = ms <= 100.0;
       e.observed = "FAULT after " + Fmt("%.2f", ms) + " ms: " + fault->state.cause().message();
     } else {
-      e.observed = "no FAULT within 2 s";
+      e.observed = "no FAULT (joint states stale) within 2 s";
     }
+    const std::string others = other_causes(frozen_at, service::UnixNowNs(), stale);
+    if (!others.empty()) e.observed += "; meanwhile " + others;
     std::this_thread::sleep_for(300ms);  // the controller stays frozen a moment, as a real stall would
     controller.Signal(SIGCONT);
     thawed_ns = service::UnixNowNs();
@@ -560,20 +611,18 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     sleep_until(start_s - 0.1);
     const std::int64_t from = service::UnixNowNs();
     std::optional<SafetyRecord> stop;
-    // The press's own STOP: a contact cause. A FAULT meanwhile (on this VM, a process the host did not run for
-    // 30 ms: docs/soak.md) hides any STOP while it is latched; it is named in the report and reset by the
-    // operator, and the wait for the press's STOP goes on.
+    // The press's own halt: a contact cause, latched as a STOP (or as a new epoch of a FAULT that held: the
+    // robot halts either way). A FAULT meanwhile that is not a contact is named in the report and reset by
+    // the operator (so the press's STOP can show), and the wait for the press's cause goes on.
     std::set<std::uint64_t> faults_reset;
     std::string faults_seen;
     auto last_reset = Clock::now() - 1s;
     WaitUntil([&] {
-      stop = first_after(from, [](const v1::SafetyState& st) {
-        return st.state() == v1::SafetyState::STATE_STOP && st.cause().kind() == v1::SafetyCause::KIND_CONTACT;
-      });
+      stop = first_cause_after(from, is_contact);
       if (stop) return true;
       const auto latest = observer.Latest();
       if (latest && latest->arrival_ns >= from && latest->state.state() == v1::SafetyState::STATE_FAULT &&
-          Clock::now() - last_reset >= 100ms) {
+          !is_contact(latest->state.cause()) && Clock::now() - last_reset >= 100ms) {
         if (faults_reset.insert(latest->state.stop_epoch()).second) {
           faults_seen += (faults_seen.empty() ? "" : ", ") + latest->state.cause().message();
         }
@@ -589,13 +638,15 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
       const double delay_ms = static_cast<double>(stop->arrival_ns - t0) / 1e6 - cross_s * 1e3;
       std::string detail;
       const bool ok = judge(*stop, detail);
-      e.pass = stop->state.state() == v1::SafetyState::STATE_STOP && c.kind() == v1::SafetyCause::KIND_CONTACT && ok;
-      e.observed = std::string(StateName(stop->state.state())) + ": " + c.message() + "; " +
+      e.pass = ok;
+      e.observed = std::string(StateName(stop->state.state())) +
+                   (stop->state.state() == v1::SafetyState::STATE_FAULT ? " (the contact latched its own epoch while a FAULT held)" : "") +
+                   ": " + c.message() + "; " +
                    Fmt("%.0f", delay_ms) + " ms after the true force crossed " + Fmt("%.1f", threshold_n) + " N" +
                    (detail.empty() ? "" : "; " + detail);
       stop_delays.push_back({name, delay_ms});
     } else {
-      e.observed = "no STOP";
+      e.observed = "no contact latched (no STOP)";
       stop_delays.push_back({name, NAN});
     }
     if (late) e.observed += "; the demo reached this press late (" + Fmt("%.2f", e.t_s) + " s)";

@@ -14,7 +14,11 @@ struct DemoOptions {
   std::string scenario_path;   // the touches (the sim's clock)
   std::string out_dir = "demo-report";
   std::string bin_dir;         // where ruffini-sim, -decoder, -aggregator, -controller are
-  double rate_hz = 1000.0;
+  double rate_hz = 1000.0;      // the interrogator's (the sim's) frame rate
+  // The controller's joint states. 250 Hz (4 ms: a KUKA RSI cycle; the soak's default too): the scene's 50 ms
+  // joint-state deadline is 12 periods. At 1 kHz the controller and the aggregator's share of it took about
+  // half a core of the two (docs/demo.md, "Load").
+  double joint_rate_hz = 250.0;
   // Mutual TLS (docs/security.md): every process gets --tls-dir DIR, the demo itself is the operator
   // (DIR/operator.crt). Empty: every process runs --insecure on loopback.
   std::string tls_dir;
