@@ -61,6 +61,28 @@ void Hello(Canonical& c, const v1::PatchHello& h) noexcept {
   c.Str(h.decoder_version());
   c.Str(h.decoder_instance());
   c.U32(h.grating_count());
+  // Added after the layout above was fixed (review 9: tests/channel/crc_descriptor_test.cpp found them outside
+  // the CRC): the faint-refusal level and the sensitivity maps the aggregator's coverage check accepts the
+  // patch on. A repeated field: its element count (4 bytes), then each element.
+  c.F32(d.faint_refuse_below_n());
+  c.U32(static_cast<std::uint32_t>(h.sensitivity_size()));
+  for (const v1::SensitivityMap& m : h.sensitivity()) {
+    c.F32(m.level_n());
+    c.F32(m.reliability());
+    c.U32(static_cast<std::uint32_t>(m.y_mm_size()));
+    for (const double v : m.y_mm()) c.F64(v);
+    c.U32(static_cast<std::uint32_t>(m.r_deg_size()));
+    for (const double v : m.r_deg()) c.F64(v);
+    c.U32(static_cast<std::uint32_t>(m.min_force_n_size()));
+    for (const float v : m.min_force_n()) c.F32(v);
+    c.U32(static_cast<std::uint32_t>(m.location_error_mm_size()));
+    for (const float v : m.location_error_mm()) c.F32(v);
+    c.U32(static_cast<std::uint32_t>(m.forces_n_size()));
+    for (const float v : m.forces_n()) c.F32(v);
+    c.U32(m.presses());
+    c.F64(m.probe_radius_mm());
+    c.Str(m.source());
+  }
 }
 
 void Contact(Canonical& c, const v1::PatchContact& k) noexcept {
