@@ -396,7 +396,26 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     return ok;
   };
   std::vector<Event> events;
+  // Each event's row says when the demo itself saw nothing for a while in the event's window (from the previous
+  // event's check to this one's): the longest stretch without a safety state (the aggregator repeats its state
+  // every heartbeat, 10 ms), when over 100 ms (a dropped stream re-opened, or the demo starved). A latched STOP or
+  // FAULT is still seen when the states resume; a CLEAR in between is not (review 8).
+  std::int64_t previous_check_ns = t0;
   auto record = [&](Event e) {
+    const std::int64_t now_ns = service::UnixNowNs();
+    std::int64_t last = previous_check_ns, longest = 0;
+    for (const auto& r : observer.Safety()) {
+      if (r.arrival_ns <= previous_check_ns) continue;
+      if (r.arrival_ns > now_ns) break;
+      longest = std::max(longest, r.arrival_ns - last);
+      last = r.arrival_ns;
+    }
+    longest = std::max(longest, now_ns - last);
+    if (longest > kMaxGapNs && !observer.safety_ended()) {  // after the shutdown the stream ends, by design
+      e.observed += "; the demo saw no safety state for " + Fmt("%.0f", static_cast<double>(longest) / 1e6) +
+                    " ms in this event's window";
+    }
+    previous_check_ns = now_ns;
     log(std::string(e.pass ? "  PASS  " : "  FAIL  ") + Fmt("%6.2f s  ", e.t_s) + e.name + ": " + e.observed);
     events.push_back(std::move(e));
   };
