@@ -576,7 +576,10 @@ void DecoderService::Impl::PublishLoop() {
     if (!channel_to_aggregator->WaitForConnected(deadline)) {
       // Nobody to send to: what is queued now is stale by the time a stream opens; drop it.
       link::Message m;
-      while (message_ring->pop(m)) stats.stale_discarded.fetch_add(1, std::memory_order_relaxed);
+      while (message_ring->pop(m)) {
+        stats.stale_discarded.fetch_add(1, std::memory_order_relaxed);
+        (void)message_ready.try_acquire();  // its count with it, so the semaphore stays in step with the ring
+      }
       if (last_error != "unreachable") {
         spdlog::warn("aggregator {}: not reachable; retrying", config.aggregator.str());
         last_error = "unreachable";

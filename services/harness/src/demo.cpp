@@ -17,6 +17,7 @@
 #include <optional>
 #include <functional>
 #include <set>
+#include <tuple>
 #include <sstream>
 #include <thread>
 #include <vector>
@@ -27,6 +28,7 @@
 #include "ruffini/plot/svg.h"
 #include "ruffini/robot/kinematics.h"
 #include "ruffini/robot/scene.h"
+#include "ruffini/safety/scene.h"
 #include "ruffini/scene_file.h"
 #include "ruffini/service/child.h"
 #include "ruffini/service/common.h"
@@ -170,6 +172,34 @@ class Observer {
     std::lock_guard lock(mu_);
     if (safety_log_.empty()) return std::nullopt;
     return safety_log_.back();
+  }
+  // The first state that arrived at or after `since_ns` and satisfies `pred`, found under the lock without
+  // copying the log (the judge polls every 2 ms; a copy of thousands of states each time took a third of a core
+  // and held the stream reader back: review 9). States are appended in arrival order.
+  std::optional<SafetyRecord> FirstSafety(std::int64_t since_ns, const std::function<bool(const v1::SafetyState&)>& pred) {
+    std::lock_guard lock(mu_);
+    auto it = std::lower_bound(safety_log_.begin(), safety_log_.end(), since_ns,
+                               [](const SafetyRecord& r, std::int64_t t) { return r.arrival_ns < t; });
+    for (; it != safety_log_.end(); ++it) {
+      if (pred(it->state)) return *it;
+    }
+    return std::nullopt;
+  }
+  // The states that arrived in [since_ns, until_ns).
+  std::vector<SafetyRecord> SafetyBetween(std::int64_t since_ns, std::int64_t until_ns) {
+    std::lock_guard lock(mu_);
+    auto cmp = [](const SafetyRecord& r, std::int64_t t) { return r.arrival_ns < t; };
+    auto from = std::lower_bound(safety_log_.begin(), safety_log_.end(), since_ns, cmp);
+    auto to = std::lower_bound(from, safety_log_.end(), until_ns, cmp);
+    return {from, to};
+  }
+  // What the demo knows of one epoch from the states it received (the first state of that epoch).
+  std::optional<v1::SafetyCause> CauseOfEpoch(std::uint64_t epoch) {
+    std::lock_guard lock(mu_);
+    for (const auto& r : safety_log_) {
+      if (r.state.stop_epoch() == epoch && r.state.state() != v1::SafetyState::STATE_CLEAR) return r.state.cause();
+    }
+    return std::nullopt;
   }
   bool safety_ended() const { return safety_ended_; }
   v1::AggregatorStatus Status() {
@@ -321,6 +351,15 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   for (const auto& p : scene.patches) patches.push_back(p.name);
   if (patches.size() < 2) throw InputError(o.scene_path + ": the demo needs at least two patches");
   const std::string killed_patch = patches.back();
+  // Joint states at least 5 periods inside the scene's joint-state deadline: slower, and one late sample faults.
+  {
+    const double max_age_s = static_cast<double>(safety::ConfigFromScene(scene).joint_state_max_age_ns) / 1e9;
+    if (!(o.joint_rate_hz * max_age_s >= 5.0)) {
+      throw InputError("--joint-rate-hz " + Fmt("%g", o.joint_rate_hz) + ": at least " + Fmt("%g", 5.0 / max_age_s) +
+                       " Hz, five joint states within the scene's " + Fmt("%g", max_age_s * 1e3) +
+                       " ms joint-state deadline (safety.joint_state_max_age_ms)");
+    }
+  }
   const fs::path out = o.out_dir;
   const fs::path run = out / "logs";
   // A fresh logs folder: a ports file left by an earlier run in the same --out would be read as this run's.
@@ -404,9 +443,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   auto record = [&](Event e) {
     const std::int64_t now_ns = service::UnixNowNs();
     std::int64_t last = previous_check_ns, longest = 0;
-    for (const auto& r : observer.Safety()) {
-      if (r.arrival_ns <= previous_check_ns) continue;
-      if (r.arrival_ns > now_ns) break;
+    for (const auto& r : observer.SafetyBetween(previous_check_ns, now_ns)) {
       longest = std::max(longest, r.arrival_ns - last);
       last = r.arrival_ns;
     }
@@ -419,12 +456,52 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     log(std::string(e.pass ? "  PASS  " : "  FAIL  ") + Fmt("%6.2f s  ", e.t_s) + e.name + ": " + e.observed);
     events.push_back(std::move(e));
   };
-  auto first_after = [&](std::int64_t since_ns, const std::function<bool(const v1::SafetyState&)>& pred)
-      -> std::optional<SafetyRecord> {
-    for (const auto& r : observer.Safety()) {
-      if (r.arrival_ns >= since_ns && pred(r.state)) return r;
+  auto first_after = [&](std::int64_t since_ns, const std::function<bool(const v1::SafetyState&)>& pred) {
+    return observer.FirstSafety(since_ns, pred);
+  };
+  auto epoch_now = [&]() -> std::uint64_t {
+    const auto latest = observer.Latest();
+    return latest ? latest->state.stop_epoch() : 0;
+  };
+  // Every epoch latched after `after` up to `upto`, as (epoch, is a contact, what). The demo does not receive
+  // every state the aggregator publishes: a subscriber's pending state is replaced by a newer one, and several
+  // causes latched in one step are published once (review 9, finding 1). An epoch the demo never received is
+  // read from the aggregator's log, which records every latch ("safety_event ... epoch=N cause=K patch=P");
+  // `missing` lists the epochs found in neither, which leave an event unjudged (a failure).
+  struct Latched {
+    std::vector<std::tuple<std::uint64_t, bool, std::string>> epochs;
+    std::vector<std::uint64_t> missing;
+  };
+  auto latched_between = [&](std::uint64_t after, std::uint64_t upto) {
+    Latched found_epochs;
+    std::string log_text;
+    for (std::uint64_t e = after + 1; e <= upto; ++e) {
+      if (const auto c = observer.CauseOfEpoch(e)) {
+        found_epochs.epochs.emplace_back(e, c->kind() == v1::SafetyCause::KIND_CONTACT, c->message());
+        continue;
+      }
+      if (log_text.empty()) log_text = aggregator.stderr_text();
+      const std::string key = " epoch=" + std::to_string(e) + " cause=";
+      bool found = false;
+      std::size_t pos = 0;
+      while ((pos = log_text.find(key, pos)) != std::string::npos) {
+        const std::size_t line = log_text.rfind('\n', pos);
+        const std::size_t begin = line == std::string::npos ? 0 : line + 1;
+        const std::size_t end = log_text.find('\n', pos);
+        const std::string text = log_text.substr(begin, end == std::string::npos ? std::string::npos : end - begin);
+        pos += key.size();
+        const bool latch = text.find("type=latch ") != std::string::npos || text.find("type=new_epoch ") != std::string::npos ||
+                           text.find("type=escalation ") != std::string::npos;
+        if (!latch) continue;
+        const std::size_t cause = text.find(" cause=") + 7;
+        const std::string kind = text.substr(cause, text.find(' ', cause) - cause);
+        found_epochs.epochs.emplace_back(e, kind == "contact", "from the aggregator's log: " + text.substr(text.find("safety_event")));
+        found = true;
+        break;
+      }
+      if (!found) found_epochs.missing.push_back(e);
     }
-    return std::nullopt;
+    return found_epochs;
   };
   // Each event is judged on the cause it expects, latched in a STOP or a FAULT (both halt the robot): a FAULT
   // the script did not cause (on this VM, a process the host did not run for 15-30 ms: docs/demo.md, "FAULTs
@@ -432,19 +509,14 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   // it holds (safety.new_epoch_per_cause), so the expected cause, or a contact that must not be there, is seen
   // whatever else latched. The other causes are named in the report.
   using CausePred = std::function<bool(const v1::SafetyCause&)>;
-  auto first_cause_after = [&](std::int64_t since_ns, const CausePred& pred) {
-    return first_after(since_ns, [&](const v1::SafetyState& s) {
-      return s.state() != v1::SafetyState::STATE_CLEAR && pred(s.cause());
-    });
-  };
   auto is_contact = [](const v1::SafetyCause& c) { return c.kind() == v1::SafetyCause::KIND_CONTACT; };
   // The causes of the epochs that arrived in [since_ns, until_ns) and that `expected` does not match.
   auto other_causes = [&](std::int64_t since_ns, std::int64_t until_ns, const CausePred& expected) {
     std::set<std::uint64_t> epochs;
     std::string text;
     int more = 0;
-    for (const auto& r : observer.Safety()) {
-      if (r.arrival_ns < since_ns || r.arrival_ns >= until_ns || r.state.state() == v1::SafetyState::STATE_CLEAR) continue;
+    for (const auto& r : observer.SafetyBetween(since_ns, until_ns)) {
+      if (r.state.state() == v1::SafetyState::STATE_CLEAR) continue;
       if (expected(r.state.cause()) || !epochs.insert(r.state.stop_epoch()).second) continue;
       if (epochs.size() > 3) {
         ++more;
@@ -473,6 +545,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   {
     const double startup_done_s = t_s();
     const std::int64_t from = service::UnixNowNs();
+    const std::uint64_t epoch_before = epoch_now();
     sleep_until(6.5);
     Event e{"light touch on forearm_a (0.7 N, threshold 1.5 N)", "no contact latched (no STOP)", t_s(), false, ""};
     const std::int64_t until = service::UnixNowNs();
@@ -485,11 +558,23 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
       if (c.arrival_ns >= from && c.patch == patches[0]) peak = std::max(peak, c.force_n);
     }
     const std::string others = other_causes(from, until, is_contact);
-    e.pass = !bad && peak > 0.2;
+    // Every epoch latched in the window, also those the demo never received (the aggregator's log).
+    const Latched all = latched_between(epoch_before, epoch_now());
+    std::string contact_latched;
+    for (const auto& [epoch, contact, what] : all.epochs) {
+      if (contact && contact_latched.empty()) contact_latched = "epoch " + std::to_string(epoch) + ": " + what;
+    }
+    e.pass = !bad && contact_latched.empty() && all.missing.empty() && peak > 0.2;
     e.observed = bad ? std::string(StateName(bad->state.state())) + ": " + bad->state.cause().message()
-                     : std::string(others.empty() ? "stayed CLEAR" : "no contact latched") + "; the touch was felt (peak " +
-                           Fmt("%.2f", peak) + " N on " + patches[0] + ")";
-    if (!bad && !others.empty()) e.observed += "; meanwhile " + others + " (not the touch)";
+                 : !contact_latched.empty()
+                     ? "a contact latched: " + contact_latched
+                     : std::string(others.empty() && all.epochs.empty() ? "stayed CLEAR" : "no contact latched") +
+                           "; the touch was felt (peak " + Fmt("%.2f", peak) + " N on " + patches[0] + ")";
+    if (!bad && contact_latched.empty() && !others.empty()) e.observed += "; meanwhile " + others + " (not the touch)";
+    if (!all.missing.empty()) {
+      e.observed += "; not judged: " + std::to_string(all.missing.size()) +
+                    " epochs latched in the window neither reached the demo nor are in the aggregator's log";
+    }
     // The script runs on the sim's clock from its start; a start-up slower than the first press (a starved
     // machine) leaves this step nothing to judge. Still a failure, named as what it is.
     constexpr double kTouchStarts_s = 4.0;
@@ -503,10 +588,15 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   std::vector<double> stop_latency_ms;
   {
     const std::int64_t from = service::UnixNowNs();
+    const std::uint64_t epoch_before = epoch_now();
     Event e{"one probe on the forearm seam (20 N, shared by both patches)", "STOP (contact above 1.5 N)", 0, false, ""};
     std::optional<SafetyRecord> stop;
+    // A contact latched after the probe began: a later epoch than the one held when it began, its frame after it.
+    const CausePred probe_contact = [&](const v1::SafetyCause& c) { return is_contact(c) && c.t_ns() >= from; };
     WaitUntil([&] {
-      stop = first_cause_after(from, is_contact);
+      stop = first_after(from, [&](const v1::SafetyState& st) {
+        return st.state() != v1::SafetyState::STATE_CLEAR && st.stop_epoch() > epoch_before && probe_contact(st.cause());
+      });
       return stop.has_value() || t_s() > 9.0;
     }, 10s, 2ms);
     e.t_s = t_s();
@@ -538,16 +628,19 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   {
     sleep_until(std::max(t_s(), 10.5));
     Event e{"decoder " + killed_patch + " killed (SIGKILL)", "FAULT within 50 ms", 0, false, ""};
+    const std::uint64_t epoch_before = epoch_now();
     const std::int64_t killed_at = service::UnixNowNs();
     killed_ns = killed_at;
     decoders[killed_patch]->Signal(SIGKILL);
+    // A FAULT latched by the kill: a later epoch than the one held before it, naming the patch, caused after it
+    // (a fault of that patch latched before the kill and republished is not the kill's: review 9).
     const CausePred killed_cause = [&](const v1::SafetyCause& c) {
-      return c.kind() != v1::SafetyCause::KIND_CONTACT && c.patch_id() == killed_patch;
+      return c.kind() != v1::SafetyCause::KIND_CONTACT && c.patch_id() == killed_patch && c.t_ns() >= killed_at;
     };
     std::optional<SafetyRecord> fault;
     WaitUntil([&] {
       fault = first_after(killed_at, [&](const v1::SafetyState& s) {
-        return s.state() == v1::SafetyState::STATE_FAULT && killed_cause(s.cause());
+        return s.state() == v1::SafetyState::STATE_FAULT && s.stop_epoch() > epoch_before && killed_cause(s.cause());
       });
       return fault.has_value();
     }, 2s);
@@ -578,14 +671,17 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   // 7. Joint states stop (the controller frozen): FAULT.
   {
     Event e{"joint states stop (controller frozen)", "FAULT (joint states stale) within 100 ms", 0, false, ""};
+    const std::uint64_t epoch_before = epoch_now();
     const std::int64_t frozen_at = service::UnixNowNs();
     frozen_ns = frozen_at;
     controller.Signal(SIGSTOP);
-    const CausePred stale = [](const v1::SafetyCause& c) { return c.kind() == v1::SafetyCause::KIND_JOINT_STATES_STALE; };
+    const CausePred stale = [&](const v1::SafetyCause& c) {
+      return c.kind() == v1::SafetyCause::KIND_JOINT_STATES_STALE && c.t_ns() >= frozen_at;
+    };
     std::optional<SafetyRecord> fault;
     WaitUntil([&] {
       fault = first_after(frozen_at, [&](const v1::SafetyState& s) {
-        return s.state() == v1::SafetyState::STATE_FAULT && stale(s.cause());
+        return s.state() == v1::SafetyState::STATE_FAULT && s.stop_epoch() > epoch_before && stale(s.cause());
       });
       return fault.has_value();
     }, 2s);
@@ -629,6 +725,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     const bool late = t_s() > start_s - 0.1;
     sleep_until(start_s - 0.1);
     const std::int64_t from = service::UnixNowNs();
+    const std::uint64_t epoch_before = epoch_now();
     std::optional<SafetyRecord> stop;
     // The press's own halt: a contact cause, latched as a STOP (or as a new epoch of a FAULT that held: the
     // robot halts either way). A FAULT meanwhile that is not a contact is named in the report and reset by
@@ -637,7 +734,12 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     std::string faults_seen;
     auto last_reset = Clock::now() - 1s;
     WaitUntil([&] {
-      stop = first_cause_after(from, is_contact);
+      // This press's contact: a later epoch than the one held when the press began, its frame after that (a
+      // STOP of the press before, republished, is not this one's: review 9).
+      stop = first_after(from, [&](const v1::SafetyState& st) {
+        return st.state() != v1::SafetyState::STATE_CLEAR && st.stop_epoch() > epoch_before && is_contact(st.cause()) &&
+               st.cause().t_ns() >= from;
+      });
       if (stop) return true;
       const auto latest = observer.Latest();
       if (latest && latest->arrival_ns >= from && latest->state.state() == v1::SafetyState::STATE_FAULT &&

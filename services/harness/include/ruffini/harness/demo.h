@@ -16,8 +16,8 @@ struct DemoOptions {
   std::string bin_dir;         // where ruffini-sim, -decoder, -aggregator, -controller are
   double rate_hz = 1000.0;      // the interrogator's (the sim's) frame rate
   // The controller's joint states. 250 Hz (4 ms: a KUKA RSI cycle; the soak's default too): the scene's 50 ms
-  // joint-state deadline is 12 periods. At 1 kHz the controller and the aggregator's share of it took about
-  // half a core of the two (docs/demo.md, "Load").
+  // joint-state deadline is 12 periods (at least 5 are required). At 1 kHz the controller alone took 3.4 to
+  // 4.4 s of CPU in the demo's first 14 s, a quarter to a third of a core (docs/demo.md, "Load").
   double joint_rate_hz = 250.0;
   // Mutual TLS (docs/security.md): every process gets --tls-dir DIR, the demo itself is the operator
   // (DIR/operator.crt). Empty: every process runs --insecure on loopback.
