@@ -384,7 +384,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   HealthPoller health(observer, patches);
   // When the scripted causes of FAULT began and ended (Unix ns), for the time in FAULT per patch.
   std::int64_t killed_ns = 0, restarted_ns = 0, frozen_ns = 0, thawed_ns = 0;
-  const std::string joint_rate = std::to_string(static_cast<int>(o.joint_rate_hz));
+  const std::string joint_rate = Fmt("%g", o.joint_rate_hz);  // as given (the controller takes any rate)
   log("aggregator on " + address + "; starting ruffini-controller (joint states at " + joint_rate + " Hz)");
   Child controller({exe("ruffini-controller"), transport, "--robot", scene.name, "--aggregator", address, "--rate-hz", joint_rate},
                    (run / "controller").string());

@@ -8,7 +8,8 @@
 // demo (four decoders, the sim, the aggregator and a controller on two cores) the decoder threads made about
 // 4.6 context switches per frame between them that way, 2.3 with this class (docs/demo.md, "Load"). POSIX
 // semaphores wait in the kernel (a futex in glibc), and sem_clockwait takes a CLOCK_MONOTONIC deadline, so a
-// wall-clock step cannot stretch or cut a wait.
+// wall-clock step cannot stretch or cut a wait (Boost.Interprocess's interprocess_semaphore::timed_wait takes a
+// wall-clock deadline, which is why this wraps sem_t itself).
 #include <semaphore.h>
 
 #include <cerrno>
