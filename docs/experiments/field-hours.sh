@@ -24,6 +24,15 @@ $B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene
   --seeds 801-810 --faint-refuse off --out "$OUT/val-faint-off"
 $B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
   --seeds 801-810 --faint-refuse on --out "$OUT/val-faint-refuse"
+# Refused after a release (stop 30; PipelineConfig::release_*, shipped 0.2 N, tau 10 s): off, and the alternatives.
+$B field-hours --model $M/forearm-field.rmodel --scene $S/forearm-field.yaml --seeds 801-810 --release-refuse-n 0 \
+  --out "$OUT/val-release-off"
+$B field-hours --model $M/forearm-field.rmodel --scene $S/forearm-field.yaml --seeds 801-810 --release-refuse-n 0.1 \
+  --out "$OUT/val-release-0.1"
+$B field-hours --model $M/forearm-field.rmodel --scene $S/forearm-field.yaml --seeds 801-810 --release-tau-s 5 \
+  --out "$OUT/val-release-tau5"
+$B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-embedded.yaml --seeds 801-810 \
+  --release-refuse-n 0 --out "$OUT/val-embedded-release-off"
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
   --scene $S/forearm-field-embedded.yaml --seeds 801-810 --faint-refuse off --out "$OUT/val-embedded-faint-off"
 $B field-hours --model $M/forearm-embedded.rmodel --scene $S/forearm-field-gradient.yaml \
@@ -48,6 +57,8 @@ R=${1:-build/release}/bin/retare_eval   # built with the tests: cmake --build --
 $R --model $M/forearm-field.rmodel --dry-run "$OUT"/v80[1-5].h5 > "$OUT/dry-run-plain.md"
 $R --model $M/forearm-field.rmodel --dry-run --separate-field "$OUT"/v80[1-5].h5 > "$OUT/dry-run-separated.md"
 # Held out, once: as shipped, and with the operator's re-tare; the embedded cast (40 pm/C) with and without a field.
+$B field-hours --model $M/forearm-field.rmodel --scene $S/forearm-field.yaml --scene $S/forearm-field-nodrift.yaml \
+  --seeds 901-910 --release-refuse-n 0 --out "$OUT/test-release-off"
 $B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \
   --scene $S/forearm-field-nodrift.yaml --seeds 901-910 --out "$OUT/test"
 $B field-hours --model $M/forearm-field.rmodel --model $M/forearm.rmodel --scene $S/forearm-field.yaml \

@@ -319,6 +319,7 @@ void DecoderService::Impl::CopyStats() {
   st(stats.frames_lost, h.frames_lost);
   st(stats.onsets, h.onsets);
   st(stats.faint_frames, h.faint_frames);
+  st(stats.release_refused_frames, h.release_refused_frames);
   for (std::size_t i = 0; i < h.decode_rejected.size(); ++i) st(stats.decode_rejected[i], h.decode_rejected[i]);
   for (std::size_t i = 0; i < h.stream_rejected.size(); ++i) st(stats.stream_rejected[i], h.stream_rejected[i]);
   for (std::size_t i = 0; i < monitor->faults().size(); ++i) st(stats.faults[i], monitor->faults()[i]);

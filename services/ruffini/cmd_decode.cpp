@@ -162,6 +162,8 @@ void RegisterEvaluate(CLI::App& app) {
     double quiet_drop = decode::PipelineConfig{}.quiet_release_drop;
     double faint_pm = decode::PipelineConfig{}.faint_pm;
     std::string faint_refuse = "model";
+    double release_refuse_n = decode::PipelineConfig{}.release_refuse_n;
+    double release_tau_s = decode::PipelineConfig{}.release_tau_s;
     decode::BaselineConfig field;
     std::string thermal_field = "model";
   };
@@ -189,6 +191,8 @@ void RegisterEvaluate(CLI::App& app) {
       ->check(CLI::Range(0.0, 100.0))->capture_default_str();
   cmd->add_option("--faint-refuse", a->faint_refuse, kFaintRefuseHelp)
       ->check(CLI::IsMember({"model", "on", "off"}))->capture_default_str();
+  cmd->add_option("--release-refuse-n", a->release_refuse_n, kReleaseRefuseHelp)->check(CLI::Range(0.0, 10.0))->capture_default_str();
+  cmd->add_option("--release-tau-s", a->release_tau_s, kReleaseTauHelp)->check(CLI::Range(0.01, 3600.0))->capture_default_str();
   cmd->add_option("--thermal-field", a->thermal_field,
                   "The baseline follows a thermal field across the patch: as the model says, on or off (docs/decoders.md)")
       ->check(CLI::IsMember({"model", "on", "off"}))->capture_default_str();
@@ -224,6 +228,8 @@ void RegisterEvaluate(CLI::App& app) {
     pcfg.quiet_release_drop = a->quiet_drop;
     pcfg.faint_pm = a->faint_pm;
     pcfg.faint_refuse = ModelOnOff(a->faint_refuse);
+    pcfg.release_refuse_n = a->release_refuse_n;
+    pcfg.release_tau_s = a->release_tau_s;
     pcfg.baseline = a->field;
     const auto sp = DecodeWithProgress(m, spec, d, "decoding frames", pcfg, a->thermal_field);
     const auto mask = eval::MaskOfIndentations(d, test);

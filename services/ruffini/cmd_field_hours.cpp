@@ -131,6 +131,8 @@ void RegisterFieldHours(CLI::App& app) {
     bool retare = false, retare_field = false;
     double gate_on_n = 0;  // 0: the model's
     std::string faint_refuse = "model";
+    double release_refuse_n = decode::PipelineConfig{}.release_refuse_n;
+    double release_tau_s = decode::PipelineConfig{}.release_tau_s;
     std::string patch;
     double retare_every_s = 10.0;
     double retare_level_n = decode::RetareConfig{}.min_force_n;
@@ -162,6 +164,8 @@ void RegisterFieldHours(CLI::App& app) {
                   "The patch of a many-patch scene to run alone, on the bench, with its own cast (default: the scene's only one)");
   cmd->add_option("--faint-refuse", a->faint_refuse, kFaintRefuseHelp)
       ->check(CLI::IsMember({"model", "on", "off"}))->capture_default_str();
+  cmd->add_option("--release-refuse-n", a->release_refuse_n, kReleaseRefuseHelp)->check(CLI::Range(0.0, 10.0))->capture_default_str();
+  cmd->add_option("--release-tau-s", a->release_tau_s, kReleaseTauHelp)->check(CLI::Range(0.01, 3600.0))->capture_default_str();
   cmd->add_flag("--retare", a->retare,
                 "The operator re-tares a stale patch (RetarePatch, judged against the model's response map) when it "
                 "goes stale and every --retare-every-s while it stays so (docs/experiments/retare.md)");
@@ -212,6 +216,8 @@ void RegisterFieldHours(CLI::App& app) {
           cfg.baseline = decode::BaselineFor(m, d.info.sample_rate_hz);
           if (a->thermal_field != "model") cfg.baseline.thermal_field = a->thermal_field == "on";
           cfg.faint_refuse = ModelOnOff(a->faint_refuse);
+          cfg.release_refuse_n = a->release_refuse_n;
+          cfg.release_tau_s = a->release_tau_s;
           const decode::Pipeline<float> pipe(m, patch.spec, cfg);
           eval::OperatorRetare op;
           op.map = m.has_response() ? &m.response() : nullptr;
@@ -240,6 +246,8 @@ void RegisterFieldHours(CLI::App& app) {
     if (a->thermal_field != "model") r << " --thermal-field " << a->thermal_field;
     if (a->gate_on_n > 0) r << " --gate-on-n " << a->gate_on_n;
     if (a->faint_refuse != "model") r << " --faint-refuse " << a->faint_refuse;
+    if (a->release_refuse_n != decode::PipelineConfig{}.release_refuse_n) r << " --release-refuse-n " << a->release_refuse_n;
+    if (a->release_tau_s != decode::PipelineConfig{}.release_tau_s) r << " --release-tau-s " << a->release_tau_s;
     if (a->retare) r << " --retare --retare-every-s " << a->retare_every_s << " --retare-level-n " << a->retare_level_n;
     if (a->retare && a->retare_field) r << " --retare-field";
     r << " --out " << a->out << "`\n\n"

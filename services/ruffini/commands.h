@@ -27,5 +27,9 @@ inline std::optional<bool> ModelOnOff(const std::string& v) {
 inline constexpr const char* kFaintRefuseHelp =
     "Faint contact frames below the model's force (or 1 N) are no contact (the baseline stays frozen, its stale clock "
     "runs): as the model says (Preprocessing.faint_refuse_below_n), on or off (docs/decoders.md \"Faint frames\")";
+inline constexpr const char* kReleaseRefuseHelp =
+    "Where faint frames are refused: after a press, contact frames below this force are no contact while the press is "
+    "recent (the cover's fading strain; docs/decoders.md \"Faint frames\"; 0: off)";
+inline constexpr const char* kReleaseTauHelp = "With --release-refuse-n: how long a press counts as recent (its peak's decay, s)";
 
 }  // namespace ruffini::cli

@@ -211,6 +211,8 @@ TEST_F(DecoderProcess, HelloThenHeartbeatsThenContactsWithTheDecodersAccuracy) {
   std::size_t faint_sent = 0;
   for (const auto& m : got) faint_sent += m.message.has_contact() && m.message.contact().faint() ? 1 : 0;
   EXPECT_GE(Metric(text, "ruffini_decoder_frames_faint_total{patch=\"forearm\"}"), static_cast<double>(faint_sent));
+  // A flag-only model never refuses after a release either (PipelineConfig::release_*).
+  EXPECT_EQ(Metric(text, "ruffini_decoder_frames_release_refused_total{patch=\"forearm\"}"), 0.0);
   EXPECT_EQ(Metric(text, "ruffini_decoder_aggregator_connected{patch=\"forearm\"}"), 1.0);
   EXPECT_EQ(Metric(text, "ruffini_decoder_healthy{patch=\"forearm\"}"), 1.0);
   EXPECT_NE(text.find("ruffini_decoder_info{patch=\"forearm\",decoder=\"paper-float\""), std::string::npos);

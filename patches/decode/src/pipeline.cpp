@@ -144,6 +144,17 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
         config_.faint_smooth_s >= 0 && config_.faint_smooth_s <= 10)) {
     throw InputError("pipeline: faint_pm must be 0..1000 pm, faint_max_n >= 0, faint_smooth_s 0..10 s");
   }
+  // The refusal after a release stays inside the faint refusal's force, which the hello declares.
+  if (!(config_.release_refuse_n >= 0 && config_.release_peak_n >= 0 && std::isfinite(config_.release_peak_n) &&
+        config_.release_tau_s > 0 && config_.release_tau_s <= 3600)) {
+    throw InputError("pipeline: release_refuse_n and release_peak_n must be >= 0, release_tau_s 0..3600 s");
+  }
+  if (*config_.faint_refuse && config_.release_refuse_n > config_.faint_max_n) {
+    throw InputError("pipeline: release_refuse_n " + std::to_string(config_.release_refuse_n) +
+                     " N is above the faint refusal's " + std::to_string(config_.faint_max_n) +
+                     " N (the force the hello declares refused)");
+  }
+  force_decay_ = static_cast<float>(std::exp(-1.0 / (config_.release_tau_s * config_.baseline.sample_rate_hz)));
   const double smooth_frames = config_.faint_smooth_s * config_.baseline.sample_rate_hz;
   smooth_alpha_ = smooth_frames > 1.0 ? static_cast<float>(1.0 - std::exp(-1.0 / smooth_frames)) : 1.0f;
 }
@@ -352,6 +363,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
   constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
   PipelineOutput out;
   ++d.counters_.frames;
+  d.recent_force_n_ *= force_decay_;  // every frame, valid or not: the peak fades with time
   auto invalid = [&](Reason r) {
     out.reason = r;
     out.force_sd_n = kNaN;
@@ -372,6 +384,7 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
     out.over_range = true;
     out.in_contact = true;
     out.force_n = static_cast<float>(config_.over_range_force_n);
+    d.recent_force_n_ = std::max(d.recent_force_n_, out.force_n);
     if (!d.contact_) ++d.counters_.onsets;
     ++d.counters_.over_range;
     d.contact_ = true;
@@ -443,6 +456,16 @@ PipelineOutput Pipeline<Scalar>::Process(const Wavelengths& wl, std::uint32_t fl
       refused = true;
       d.open_run_ = 0;
     }
+  }
+  // After a release (PipelineConfig::release_*): the cover's fading strain and the window's lag, below
+  // release_refuse_n, are no contact while a press of release_peak_n or more is recent. Same treatment as a
+  // refused faint frame: the gate stays open (the baseline frozen, its stale clock running).
+  if (std::isfinite(o.force_n)) d.recent_force_n_ = std::max(d.recent_force_n_, o.force_n);
+  if (!refused && *config_.faint_refuse && config_.release_refuse_n > 0 && o.in_contact &&
+      o.force_n < config_.release_refuse_n && d.recent_force_n_ >= config_.release_peak_n) {
+    refused = true;
+    d.open_run_ = 0;
+    ++d.counters_.release_refused;
   }
   bool quiet = false;
   if (config_.quiet_release_pm > 0) {

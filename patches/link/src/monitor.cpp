@@ -163,6 +163,7 @@ void Monitor::FillHealth() noexcept {
   health_.valid_frames = c.valid;
   health_.onsets = c.onsets;
   health_.faint_frames = c.faint;
+  health_.release_refused_frames = c.release_refused;
   for (std::size_t i = 0; i < decode::kReasonCount; ++i) health_.decode_rejected[i] = c.invalid[i];
   health_.in_contact = in_contact_;
   switch (b.state()) {

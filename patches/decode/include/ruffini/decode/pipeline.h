@@ -119,6 +119,17 @@ struct PipelineConfig {
   double faint_smooth_s = 0.1;
   std::optional<bool> faint_refuse;
   double faint_max_n = 1.0;
+  // Refused after a release (issue 17; only where faint frames are refused, and never above faint_max_n, so
+  // within the force the hello declares and the aggregator checks against every threshold). A gate-open frame
+  // whose networks' force is below release_refuse_n, while the networks' force of the last moments (its peak,
+  // decaying with release_tau_s) reached release_peak_n, is no contact (force 0). After a press the cover's
+  // residual strain fades over seconds and the window lags the release: those frames read 50-250 mN with
+  // nothing touching, most of the field's false contacts. As with a faint frame the gate stays open, so the
+  // baseline stays frozen and its stale clock runs: nothing is absorbed, only the report changes.
+  // release_refuse_n 0: off. Chosen on validation hours (docs/experiments/field-hours.md).
+  double release_refuse_n = 0.2;
+  double release_peak_n = 0.3;
+  double release_tau_s = 10.0;
 };
 
 struct PipelineOutput {
@@ -154,6 +165,7 @@ struct PipelineCounters {
   std::uint64_t over_range = 0;  // frames reported over range (also counted in invalid[reason])
   std::uint64_t multiple = 0;    // located frames flagged as more than one touch
   std::uint64_t faint = 0;       // gate-open frames flagged faint (PipelineConfig::faint_*)
+  std::uint64_t release_refused = 0;  // gate-open frames refused after a release (PipelineConfig::release_*)
   std::array<std::uint64_t, kReasonCount> invalid{};  // indexed by Reason (kOk stays 0)
 };
 
@@ -185,6 +197,7 @@ class Pipeline {
     bool contact_ = false;  // the reported contact (the gate, confirmed)
     bool over_range_ = false;  // the last frame was over range
     float recent_peak_pm_ = 0.0f;  // largest |shift| lately, decaying (quiet release after a drop)
+    float recent_force_n_ = 0.0f;  // largest networks' force lately, decaying (refused after a release)
     TouchVerdict pair_;            // the last two-touch fit, reused for multi_refit_s while the flag holds
     int pair_age_ = 1 << 30;       // frames since it (large: none)
     ShiftsPm smooth_{};            // the shifts, smoothed over faint_smooth_s
@@ -206,6 +219,7 @@ class Pipeline {
     d.open_run_ = 0;
     d.gate_ = d.contact_ = d.over_range_ = false;
     d.recent_peak_pm_ = 0.0f;
+    d.recent_force_n_ = 0.0f;
     d.pair_age_ = 1 << 30;
     d.place_y_mm_ = d.place_a_mm_ = BaselineTracker::kNoPlace;
   }
@@ -248,6 +262,7 @@ class Pipeline {
   std::array<double, kGratings> grating_y_mm_{}, grating_a_mm_{};  // centres, arc length for R
   std::array<std::uint16_t, kGratings> linked_{};  // bit j of linked_[i]: gratings i and j within multi_link_mm
   float peak_decay_ = 0.0f;
+  float force_decay_ = 0.0f;   // release_tau_s as a decay per frame
   float smooth_alpha_ = 1.0f;  // faint_smooth_s as an exponential filter's weight per frame
 };
 

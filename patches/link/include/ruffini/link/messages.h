@@ -50,6 +50,7 @@ struct Health {
   std::uint64_t frames_lost = 0;
   std::uint64_t onsets = 0;
   std::uint64_t faint_frames = 0;  // contact frames flagged faint (decode::PipelineCounters::faint)
+  std::uint64_t release_refused_frames = 0;  // refused after a release (decode::PipelineCounters::release_refused)
   std::uint64_t messages_dropped = 0;  // heartbeats and mid-contact frames dropped on a full ring
   std::uint64_t frames_dropped = 0;    // frames the ingest thread dropped on a full ring (overload)
   std::array<std::uint64_t, decode::kReasonCount> decode_rejected{};  // by decode::Reason
