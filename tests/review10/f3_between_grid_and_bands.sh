@@ -5,7 +5,7 @@
 #  (a) the map's own tool on a grid offset into those strips (--edge-mm 13 --step-mm 13, held-out seed 5000)
 #      finds 7 covered points per upper-arm patch needing 2.5-3 N; check-scene with that map refuses the scene;
 #  (b) end to end (real sim, decoders, aggregator), 2.25 N presses with the map's press shape there: about
-#      half give no STOP (20 of 36 in review 10's run).
+#      half give no STOP (20 and 21 of 36 in review 10's two runs).
 # Run from the repository root; about 3 min. Exit 1 when the claim fails.
 set -u; B=${B:-/work/main/build/release/bin}; D=${D:-/tmp/r10/f3}; mkdir -p $D tests/review10/models
 $B/ruffini sensitivity --scene config/scenes/cobot.yaml --patch upper_arm_a --out tests/review10/models/ua-e13.rmodel \
