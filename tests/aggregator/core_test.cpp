@@ -465,6 +465,27 @@ TEST_F(CoreLoweringStopRule, ATwoTouchFramesForceIsALowerBoundAndNotLowered) {
   EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP);
 }
 
+// An over-range contact (saturated, lost or out-of-band peaks under load) stops whatever its force says: the force
+// is the decoder's lower bound (review 10, finding 8: a region above it would never stop on a saturated press). A
+// two-touch frame's raised force, also a lower bound, is judged as before.
+TEST_F(CoreTest, AnOverRangeContactStopsBelowTheThresholdATwoTouchFrameDoesNot) {
+  const std::vector<int> streams = ClearAll();
+  const float threshold = setup.safety.regions[static_cast<std::size_t>(
+      core.policy().FindRegion(setup.safety.patches[2].region))].threshold_n;
+  v1::PatchMessage m = ContactMsg(0.5f * threshold, tc);
+  m.mutable_contact()->set_onset(true);
+  m.mutable_contact()->set_located(true);
+  m.mutable_contact()->set_y_mm(60);
+  m.mutable_contact()->set_r_deg(30);
+  m.mutable_contact()->set_multiple(true);
+  Send(streams[2], 2, m, tc);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_CLEAR) << "a two-touch frame at half the threshold";
+  v1::PatchMessage o = ContactMsg(0.5f * threshold, tc + kMs);
+  o.mutable_contact()->set_over_range(true);
+  Send(streams[2], 2, o, tc + kMs);
+  EXPECT_EQ(core.SafetyState().state(), v1::SafetyState::STATE_STOP) << "an over-range contact at half the threshold";
+}
+
 TEST_F(CoreStopRule, ACalibratedSdIsJudgedAndAnUncalibratedOneIsNot) {
   const std::vector<int> streams = ClearAll();
   const std::int64_t t = tc;

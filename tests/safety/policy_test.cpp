@@ -997,8 +997,9 @@ TEST(SafetyEvents, LatchesEscalationsAndResetsAreRecorded) {
 
 // The scene's stop rule (Config::stop_rule, docs/safety.md "The stop rule"): a contact is judged at
 // force + sd_k x sd.
-void Judge(World& w, float force_n, float sd_n, bool over_range = false) {
-  w.last = w.policy.OnContact(w.data, "forearm", {.force_n = force_n, .force_sd_n = sd_n, .over_range = over_range}, w.t);
+void Judge(World& w, float force_n, float sd_n, bool over_range = false, bool saturated = false) {
+  w.last = w.policy.OnContact(
+      w.data, "forearm", {.force_n = force_n, .force_sd_n = sd_n, .over_range = over_range, .saturated = saturated}, w.t);
 }
 
 TEST(SafetyStopRule, ThePositiveRuleStopsOnAnUncertainReadingBelowTheThreshold) {
@@ -1061,6 +1062,29 @@ TEST(SafetyStopRule, TheNegativeRuleAsksForMarginAndIsBounded) {
   o.Clear();
   Judge(o, 160.5f, 1.0f, /*over_range=*/true);
   EXPECT_EQ(o.state(), State::kStop);
+}
+
+// An over-range contact stops whatever the region's threshold: its force is a lower bound (2.5 N from the shipped
+// decoders), and a region at 160 N would otherwise never stop on a saturated press (review 10, finding 8). The
+// same force not over range does not stop, and the cause holds while over-range frames go on.
+TEST(SafetyStopRule, AnOverRangeContactStopsAboveAnyThreshold) {
+  World w(TwoPatchScene());  // forearm region: 160 N
+  w.Clear();
+  Judge(w, 2.5f, 0.1f);
+  EXPECT_EQ(w.state(), State::kClear);
+  Judge(w, 2.5f, 0.1f, /*over_range=*/true);  // a lower bound only (a two-touch frame's raised force): judged
+  EXPECT_EQ(w.state(), State::kClear);
+  Judge(w, 2.5f, 0.1f, /*over_range=*/true, /*saturated=*/true);
+  EXPECT_EQ(w.state(), State::kStop);
+  w.touching.insert("forearm");
+  for (int k = 0; k < 30; ++k) {  // 300 ms of over-range frames, every patch healthy
+    w.Beat(10);
+    Judge(w, 2.5f, 0.1f, /*over_range=*/true, /*saturated=*/true);
+  }
+  EXPECT_EQ(w.state(), State::kStop);
+  const ResetResult r = w.ResetCurrent();
+  EXPECT_FALSE(r.accepted) << "a reset while the over-range press is held";
+  EXPECT_EQ(r.reason, ResetRefusal::kCausePresent);
 }
 
 // A lowering rule may delay a STOP's start, never end one early: the release is judged on the force too.

@@ -537,6 +537,7 @@ Core::Reply Core::Judge(int stream, Stream& s, const v1::PatchMessage& m, std::i
       // Lower bounds the stop rule never lowers: an over-range contact, and a two-touch frame (its force may be
       // the stronger fitted touch's lower bound, docs/decoders.md "Two touches").
       sc.over_range = c.over_range() || (c.located() && c.multiple());
+      sc.saturated = c.over_range();
       sc.released = c.released();
       sc.t_ns = m.t_ns();
       sc.doubt = doubt;

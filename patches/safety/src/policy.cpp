@@ -417,7 +417,10 @@ Step Policy::OnContact(Data& d, std::string_view patch_id, const Contact& c, std
   // force (sd_k < 0) may delay a STOP's start, never end one while the reading is above the release level.
   const float release_force_n = std::max(force_n, std::max(c.force_n, 0.0f));
   const RegionConfig& rc = config_.regions[static_cast<std::size_t>(region)];
-  const bool over = force_n > cause.threshold_n;  // at the threshold never stops
+  // At the threshold never stops. An over-range contact always does, whatever the threshold: its force is only
+  // the decoder's lower bound (the skin cannot say how far above it the press is), so a region whose threshold
+  // is above that bound would otherwise never stop on a saturated press (review 10, finding 8).
+  const bool over = force_n > cause.threshold_n || c.saturated;
   const bool was_over = p.contact_over;
   p.contact_force_n = c.force_n;
   if (c.released) {

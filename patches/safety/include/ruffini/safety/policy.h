@@ -243,6 +243,8 @@ struct Contact {
   float force_sd_n = 0;           // the decoder's 1-sigma (0: not calibrated); used by Config::stop_rule only
   bool over_range = false;        // force_n is a lower bound: over range, or a two-touch frame's raised force
                                   // (never lowered by the stop rule)
+  bool saturated = false;         // PatchContact.over_range: more load than the decoder can read; a STOP at any
+                                  // threshold (force_n is only its lower bound)
   // The caller found the frame untrustworthy (kBadPosition, kBadCovariance, kImplausibleTime): refused as a
   // doubt (STOP), counted under that rejection; p_bc_m is then ignored.
   Rejection doubt = Rejection::kNone;
