@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <random>
 #include <sstream>
 
@@ -202,6 +203,7 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
       cp.maps = has_model[i] ? &models[i].sensitivity() : nullptr;
       cp.extent_y_mm = scene.patches[i].spec.extent_y_mm;
       cp.extent_r_deg = scene.patches[i].spec.extent_r_deg;
+      cp.mm_per_deg = scene.patches[i].spec.surface_radius_mm * std::numbers::pi / 180.0;
       patches.push_back(cp);
     }
     // A stop rule that lowers a force (sd_k < 0) needs maps at the threshold plus the largest lowering.
@@ -266,6 +268,10 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
           why += " (the threshold plus the stop rule's largest lowering, |sd_k| x max_sd_n = " + Num(margin) + " N)";
         }
         why += " (measure one with `ruffini sensitivity`, or accept the whole patch as uncovered)";
+      } else if (!g.unmeasured.empty()) {
+        why += "not guaranteed:";
+        for (const auto& u : g.unmeasured) why += " " + u + ";";
+        why += " measure the map to the edges (`ruffini sensitivity`) or accept the strips as uncovered bands";
       } else {
         why += "below what its patches guarantee, " + Num(g.guaranteed_threshold_n) + " N (" +
                std::to_string(g.uncovered.size()) + " of " + std::to_string(g.covered_points) +
@@ -300,6 +306,7 @@ std::string DescribeCoverage(const SceneCoverage& c, bool points) {
         << "reported above the level on the covered surface: " << r.covered_points() << " of " << r.points()
         << " map points): " << (g.ok() ? "GUARANTEED" : "NOT GUARANTEED") << "\n";
     for (const auto& id : g.unmapped) out << "  patch " << id << ": no sensitivity map at or above the threshold\n";
+    for (const auto& u : g.unmeasured) out << "  " << u << "\n";
     for (const v1::AcceptedBand& b : r.accepted_bands()) {
       out << "  accepted uncovered band " << b.name() << " on " << (b.patch_id().empty() ? "every patch" : b.patch_id()) << ": Y " << Num(b.y_min_mm()) << ".."
           << Num(b.y_max_mm()) << " mm, R " << Num(b.r_min_deg()) << ".." << Num(b.r_max_deg()) << " deg, "

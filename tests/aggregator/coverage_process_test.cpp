@@ -27,13 +27,13 @@ namespace fs = std::filesystem;
 
 const std::string kSrc = RUFFINI_SOURCE_DIR;
 
-// The map: Y {2, 75, 148} x R {3, 100}; 2 N everywhere but (75, 100): 5 N. Level 1.5 N.
+// The map: Y {2, 75, 148} x R {3, 142}, within 2 mm of every edge; 2 N everywhere but (75, 142): 5 N. Level 1.5 N.
 v1::SensitivityMap Map() {
   v1::SensitivityMap m;
   m.set_level_n(1.5f);
   m.set_reliability(0.95f);
   for (double y : {2.0, 75.0, 148.0}) m.add_y_mm(y);
-  for (double r : {3.0, 100.0}) m.add_r_deg(r);
+  for (double r : {3.0, 142.0}) m.add_r_deg(r);
   for (int k = 0; k < 6; ++k) {
     m.add_min_force_n(k == 3 ? 5.0f : 2.0f);
     m.add_location_error_mm(1.0f + static_cast<float>(k));
@@ -80,7 +80,7 @@ const std::string kBand =
     "    press_factor: 1.5\n"
     "    source: issue 16's target\n"
     "    accepted_uncovered:\n"
-    "      - {name: middle, patch: forearm, y_mm: [70, 80], r_deg: [90, 110], source: the test's weak point}\n";
+    "      - {name: middle, patch: forearm, y_mm: [70, 80], r_deg: [135, 145], source: the test's weak point}\n";
 
 v1::AggregatorStatus Status(const std::string& address) {
   auto stub = v1::Aggregator::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
@@ -106,7 +106,7 @@ TEST(CoverageProcess, ASceneBelowItsGuaranteeIsRefused) {
   rt::Process check({RUFFINI_EXE, "check-scene", scene, "--points"}, dir);
   EXPECT_EQ(check.WaitExit(30s), 1);
   EXPECT_NE(check.stdout_text().find("NOT GUARANTEED"), std::string::npos) << check.stdout_text();
-  EXPECT_NE(check.stdout_text().find("forearm Y 75.00 mm R 100.00 deg: 5.00 N"), std::string::npos) << check.stdout_text();
+  EXPECT_NE(check.stdout_text().find("forearm Y 75.00 mm R 142.00 deg: 5.00 N"), std::string::npos) << check.stdout_text();
 }
 
 TEST(CoverageProcess, AcceptedBandsMakeItLoadAndAreListedInTheLogAndStatusWithEveryMapAndTheHello) {
@@ -159,10 +159,31 @@ TEST(CoverageProcess, AcceptedBandsMakeItLoadAndAreListedInTheLogAndStatusWithEv
   EXPECT_EQ(st.patches(0).hello().sensitivity(0).SerializeAsString(), Map().SerializeAsString());
 }
 
+// Review 10, finding 4: a map whose grid stops short of the patch's edges (here 20 mm from the Y 0 edge, and
+// 43 deg, about 28 mm, from the R end) left those strips counted as covered. The aggregator and check-scene refuse
+// the scene and name each strip never measured.
+TEST(CoverageProcess, AMapThatStopsShortOfTheEdgesIsRefusedNamingTheStrips) {
+  const std::string dir = (fs::current_path() / "coverage_truncated").string();
+  const std::string scene = MakeScene(dir, kBand, [](v1::DecoderModel& m) {
+    m.mutable_sensitivity(0)->set_y_mm(0, 20.0);
+    m.mutable_sensitivity(0)->set_r_deg(1, 100.0);
+  });
+  rt::Process agg({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", scene, "--listen", "127.0.0.1:0", "--metrics",
+                   "127.0.0.1:0"},
+                  dir);
+  EXPECT_EQ(agg.WaitExit(10s), 1);
+  const std::string err = agg.stderr_text();
+  EXPECT_NE(err.find("patch forearm: its map's grid stops 20.0 mm from the Y 0 edge"), std::string::npos) << err;
+  EXPECT_NE(err.find("from the R end edge"), std::string::npos) << err;
+  rt::Process check({RUFFINI_EXE, "check-scene", scene}, dir);
+  EXPECT_EQ(check.WaitExit(30s), 1);
+  EXPECT_NE(check.stdout_text().find("never measured"), std::string::npos) << check.stdout_text();
+}
+
 TEST(CoverageProcess, ABandBeyondItsPatchIsAClearError) {
   const std::string dir = (fs::current_path() / "coverage_beyond").string();
   std::string band = kBand;
-  band.replace(band.find("r_deg: [90, 110]"), 16, "r_deg: [90, 200]");
+  band.replace(band.find("r_deg: [135, 145]"), 17, "r_deg: [135, 200]");
   const std::string scene = MakeScene(dir, band);
   rt::Process agg({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", scene, "--listen", "127.0.0.1:0", "--metrics",
                    "127.0.0.1:0"},

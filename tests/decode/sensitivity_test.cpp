@@ -134,6 +134,36 @@ TEST(Sensitivity, ARegionBelowItsGuaranteeIsRefusedAnAcceptedBandMakesItHold) {
   EXPECT_EQ(g.unmapped.size(), 2u);
 }
 
+// Review 10, finding 4: a map measured 20 mm inside every edge guaranteed the whole patch, and 200 N presses at its
+// edges went unstopped. A strip between an edge and the map's outermost grid line wider than 2.5 mm is covered
+// surface never measured: the region is refused, naming it, unless accepted bands hold the whole strip.
+TEST(Sensitivity, AMapThatStopsShortOfAnEdgeGuaranteesNothingThere) {
+  google::protobuf::RepeatedPtrField<v1::SensitivityMap> full, trunc;
+  *full.Add() = Map(1.5f, 2.0f, 2.0f);  // Y 2..148 of 150 mm
+  v1::SensitivityMap t = Map(1.5f, 2.0f, 2.0f);
+  t.set_y_mm(0, 20.0);                  // Y 20..148: the first 20 mm never measured
+  *trunc.Add() = t;
+  const double mm_per_deg = 37.4 * 3.14159265358979 / 180.0;
+  // R 3..100 deg of 145: the R strips are judged only with the radius.
+  CoveragePatch a{"a", &full}, b{"b", &trunc};
+  EXPECT_TRUE(GuaranteeRegion({a}, {}, 1.5, 1.5).ok());
+  RegionGuarantee g = GuaranteeRegion({b}, {}, 1.5, 1.5);
+  EXPECT_FALSE(g.ok());
+  ASSERT_EQ(g.unmeasured.size(), 1u);
+  EXPECT_NE(g.unmeasured[0].find("20.0 mm from the Y 0 edge"), std::string::npos) << g.unmeasured[0];
+  EXPECT_TRUE(std::isinf(g.stop_force_n));
+  // A band holding Y 0..20 on every R accepts the strip; one that leaves a sliver (Y 0..19) does not.
+  EXPECT_TRUE(GuaranteeRegion({b}, {{"wrist", "b", 0, 20, 0, 145, "t"}}, 1.5, 1.5).ok());
+  EXPECT_FALSE(GuaranteeRegion({b}, {{"wrist", "b", 0, 19, 0, 145, "t"}}, 1.5, 1.5).ok());
+  EXPECT_FALSE(GuaranteeRegion({b}, {{"wrist", "b", 0, 20, 0, 140, "t"}}, 1.5, 1.5).ok());
+  // With the radius, R 3 deg (2 mm) is within reach and R 100 of 145 deg (29 mm) is not.
+  a.mm_per_deg = mm_per_deg;
+  g = GuaranteeRegion({a}, {}, 1.5, 1.5);
+  ASSERT_EQ(g.unmeasured.size(), 1u);
+  EXPECT_NE(g.unmeasured[0].find("R end edge"), std::string::npos) << g.unmeasured[0];
+  EXPECT_TRUE(GuaranteeRegion({a}, {{"side", "a", 0, 150, 100, 145, "t"}}, 1.5, 1.5).ok());
+}
+
 TEST(Sensitivity, ABandWithoutAPatchLiesOnEveryPatch) {
   google::protobuf::RepeatedPtrField<v1::SensitivityMap> a, b;
   *a.Add() = Map(1.5f, 2.0f, 5.0f);

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
+#include <string>
 
 #include "ruffini/error.h"
 
@@ -69,6 +72,54 @@ double EdgeReachMm(const v1::SensitivityMap& map, const std::function<double(dou
   return reach[lo] + (q - static_cast<double>(lo)) * (reach[hi] - reach[lo]);
 }
 
+namespace {
+
+// The strips between each edge of p and m's outermost grid lines that are wider than kMaxMapEdgeGapMm and hold
+// some point outside every accepted band of the patch (sampled every 0.25 mm and 0.25 deg, edges included).
+void UnmeasuredStrips(const CoveragePatch& p, const v1::SensitivityMap& m, const std::vector<UncoveredBand>& bands,
+                      const std::vector<std::size_t>& mine, std::vector<std::string>& out) {
+  if (m.y_mm_size() == 0 || m.r_deg_size() == 0) {
+    out.push_back("patch " + p.id + ": its map has no grid");
+    return;
+  }
+  const auto [ylo, yhi] = std::minmax_element(m.y_mm().begin(), m.y_mm().end());
+  const auto [rlo, rhi] = std::minmax_element(m.r_deg().begin(), m.r_deg().end());
+  const double deg_mm = p.mm_per_deg > 0 ? p.mm_per_deg : 0.0;  // 0: the R strips' gaps are 0, never judged
+  struct Strip {
+    const char* edge;
+    double gap_mm, y0, y1, r0, r1;
+  };
+  const Strip strips[] = {
+      {"Y 0", *ylo, 0.0, *ylo, 0.0, p.extent_r_deg},
+      {"Y end", p.extent_y_mm - *yhi, *yhi, p.extent_y_mm, 0.0, p.extent_r_deg},
+      {"R 0", *rlo * deg_mm, 0.0, p.extent_y_mm, 0.0, *rlo},
+      {"R end", (p.extent_r_deg - *rhi) * deg_mm, 0.0, p.extent_y_mm, *rhi, p.extent_r_deg},
+  };
+  for (const Strip& s : strips) {
+    if (!(s.gap_mm > kMaxMapEdgeGapMm)) continue;  // NaN extents count as unmeasured
+    bool covered = false;
+    const int ny = static_cast<int>(std::ceil((s.y1 - s.y0) / 0.25)), nr = static_cast<int>(std::ceil((s.r1 - s.r0) / 0.25));
+    for (int iy = 0; iy <= ny && !covered; ++iy) {
+      const double y = std::min(s.y1, s.y0 + 0.25 * iy);
+      for (int ir = 0; ir <= nr && !covered; ++ir) {
+        const double r = std::min(s.r1, s.r0 + 0.25 * ir);
+        bool in_band = false;
+        for (std::size_t b : mine) in_band = in_band || bands[b].Contains(y, r);
+        covered = !in_band;
+      }
+    }
+    if (!covered) continue;
+    char buf[256];
+    std::snprintf(buf, sizeof buf,
+                  "patch %s: its map's grid stops %.1f mm from the %s edge (more than %.1f mm), and that strip is not "
+                  "in an accepted band: never measured",
+                  p.id.c_str(), s.gap_mm, s.edge, kMaxMapEdgeGapMm);
+    out.emplace_back(buf);
+  }
+}
+
+}  // namespace
+
 RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const std::vector<UncoveredBand>& bands,
                                 double threshold_n, double press_factor, double judge_margin_n) {
   RegionGuarantee g;
@@ -102,6 +153,7 @@ RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const
     }
     any_map = true;
     level = std::max(level, static_cast<double>(m->level_n()));
+    UnmeasuredStrips(p, *m, bands, mine, g.unmeasured);
     for (int iy = 0; iy < m->y_mm_size(); ++iy) {
       for (int ir = 0; ir < m->r_deg_size(); ++ir) {
         const double y = m->y_mm(iy), r = m->r_deg(ir);
@@ -125,6 +177,7 @@ RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const
   }
   if (any_map) {
     g.map_level_n = level;
+    if (!g.unmeasured.empty()) stop = std::numeric_limits<double>::infinity();
     g.stop_force_n = stop;
     g.guaranteed_threshold_n = stop / press_factor;
   } else if (g.unmapped.empty()) {

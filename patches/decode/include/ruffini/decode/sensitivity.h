@@ -50,7 +50,12 @@ struct CoveragePatch {
   std::string id;
   const google::protobuf::RepeatedPtrField<v1::SensitivityMap>* maps = nullptr;
   double extent_y_mm = 150.0, extent_r_deg = 145.0;  // the spec's surface
+  double mm_per_deg = 0.0;  // arc length per degree on the surface (the spec's radius); 0: R edges not judged
 };
+
+// A map's grid reaches within this of each edge of its patch (`ruffini sensitivity` measures 2 mm from each
+// edge); a wider strip between an edge and the map's outermost grid line was never measured.
+inline constexpr double kMaxMapEdgeGapMm = 2.5;
 
 struct BandCount {
   std::string name;
@@ -73,9 +78,14 @@ struct RegionGuarantee {
   std::vector<BandCount> bands;          // the accepted bands on this region's patches, in the scene's order
   std::vector<std::string> unmapped;     // patches whose model has no map at or above the threshold
   std::vector<UncoveredPoint> uncovered; // covered points missing the guarantee (what a band would have to accept)
+  // Covered strips the map never measured: between an edge and the map's outermost grid line, wider than
+  // kMaxMapEdgeGapMm and not inside the accepted bands (review 10, finding 4). Each makes the guarantee infinite.
+  std::vector<std::string> unmeasured;
   // The scene's threshold is guaranteed: no unmapped patch (unless accepted whole) and threshold_n >=
   // guaranteed_threshold_n.
-  [[nodiscard]] bool ok() const noexcept { return unmapped.empty() && threshold_n >= guaranteed_threshold_n; }
+  [[nodiscard]] bool ok() const noexcept {
+    return unmapped.empty() && unmeasured.empty() && threshold_n >= guaranteed_threshold_n;
+  }
 };
 
 // Computes a region's guarantee. A patch with no map at or above threshold_n + judge_margin_n is unmapped
