@@ -52,6 +52,9 @@ int main(int argc, char** argv) {
   app.add_option("--max-frozen-s", config.max_frozen_s,
                  "The baseline's staleness limit, s (0: the default, 300 s). For tests: a stale baseline in seconds")
       ->capture_default_str();
+  app.add_option("--rest-file", config.rest_file,
+                 "The patch's rest baseline, written while at rest and checked at start-up: a capture under a press "
+                 "held through a restart is refused (docs/decoder-service.md \"Rest file\"; default: none)");
   app.add_option("--ports-file", ports_file, "Write the chosen metrics port here ('metrics P')");
   auto* tls_opt = app.add_option("--tls-dir", config.tls_dir,
                                  "Mutual TLS: DIR/ca.crt, DIR/decoder-PATCH.crt and DIR/decoder-PATCH.key (docs/security.md)")

@@ -13,6 +13,7 @@
 #include <boost/lockfree/spsc_queue.hpp>
 #include <chrono>
 #include <filesystem>
+#include <condition_variable>
 #include <mutex>
 #include <thread>
 
@@ -30,6 +31,7 @@
 #include "ruffini/safety/scene.h"
 #include "ruffini/scene_file.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
+#include "rest_file.h"
 #include "stats.h"
 
 namespace ruffini::decoder {
@@ -292,6 +294,17 @@ struct DecoderService::Impl {
   std::shared_ptr<StatsCollectable> collectable;
 
   std::thread ingest_thread, decode_thread, publish_thread;
+  // The rest file: the decode thread leaves the baseline at rest here (try_lock, never waits), the writer
+  // thread writes it out when it is new.
+  std::mutex rest_mutex;
+  Wavelengths rest_nm{};
+  std::uint64_t rest_version = 0;
+  std::int64_t next_rest_ns = 0;
+  std::thread rest_thread;
+  std::mutex rest_wake_mutex;
+  std::condition_variable rest_wake;
+  bool stop_rest = false;
+  void RestLoop();
   std::atomic<bool> stop_decode{false}, stop_publish{false}, decode_done{false};
   std::shared_ptr<grpc::Channel> channel_to_aggregator;
   std::mutex ctx_mutex;
@@ -330,6 +343,42 @@ void DecoderService::Impl::CopyStats() {
   for (std::size_t i = 0; i < monitor->retares().size(); ++i) st(stats.retares[i], monitor->retares()[i]);
   stats.drift_pm.store(h.drift_pm, std::memory_order_relaxed);
   stats.common_mode_pm.store(h.common_mode_pm, std::memory_order_relaxed);
+  st(stats.captures_refused, pipeline->baseline().captures_refused());
+  // The rest baseline, once a second while healthy, tracking and out of contact (the writer takes it).
+  const std::int64_t mono = service::MonoNowNs();
+  if (!config.rest_file.empty() && mono >= next_rest_ns && h.healthy && !h.in_contact &&
+      h.baseline == link::BaselineState::kTracking) {
+    std::unique_lock lock(rest_mutex, std::try_to_lock);
+    if (lock.owns_lock()) {
+      rest_nm = pipeline->baseline().baseline_nm();
+      ++rest_version;
+      next_rest_ns = mono + 1'000'000'000;
+    }
+  }
+}
+
+// Writes the rest baseline every 5 s when it is new: to FILE.tmp, then renamed over FILE (a reader sees the old
+// file or the new one, never half of one).
+void DecoderService::Impl::RestLoop() {
+  std::uint64_t written = 0;
+  std::unique_lock wake(rest_wake_mutex);
+  while (!stop_rest) {
+    rest_wake.wait_for(wake, std::chrono::seconds(5), [&] { return stop_rest; });
+    Wavelengths nm{};
+    std::uint64_t version = 0;
+    {
+      std::lock_guard lock(rest_mutex);
+      nm = rest_nm;
+      version = rest_version;
+    }
+    if (version == written) continue;
+    try {
+      WriteRestFile(config.rest_file, patch_id, nm);
+      written = version;
+    } catch (const std::exception& e) {
+      spdlog::error("rest file {}: {}", config.rest_file, e.what());
+    }
+  }
 }
 
 void DecoderService::Impl::DecodeLoop() {
@@ -635,6 +684,18 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
     throw InputError("--heartbeat-ms " + std::to_string(s.config.heartbeat_ms) + ": expected above 0, at most 1000");
   }
   s.pipeline_config.baseline = decode::BaselineFor(s.model, s.config.rate_hz);
+  if (!s.config.rest_file.empty()) {
+    if (std::filesystem::exists(s.config.rest_file)) {
+      const RestFile rest = ReadRestFile(s.config.rest_file, s.patch_id, s.patch->spec);
+      s.pipeline_config.baseline.rest_nm = rest.wavelength_nm;
+      spdlog::info("rest file {}: the start-up capture must match the rest of {} s ago within {} pm (common mode removed)",
+                   s.config.rest_file, std::max<std::int64_t>(0, UnixNowS() - rest.unix_s),
+                   s.pipeline_config.baseline.rest_tolerance_pm);
+    } else {
+      spdlog::warn("rest file {}: none yet, so the first capture is trusted (a press held now is taken for the rest)",
+                   s.config.rest_file);
+    }
+  }
   if (!(s.config.max_frozen_s >= 0.0 && s.config.max_frozen_s <= 86400.0)) {
     throw InputError("--max-frozen-s " + std::to_string(s.config.max_frozen_s) + ": expected 0 (the default) to 86400");
   }
@@ -746,6 +807,7 @@ void DecoderService::Start() {
   s.decode_thread = std::thread([&s] { s.DecodeLoop(); });
   s.publish_thread = std::thread([&s] { s.PublishLoop(); });
   s.ingest_thread = std::thread([&s] { s.ingest->Run(); });
+  if (!s.config.rest_file.empty()) s.rest_thread = std::thread([&s] { s.RestLoop(); });
   // Named (at most 15 characters), so top, perf and /proc/<pid>/task tell the three apart (ruffini
   // bench-service reports the CPU of each).
   pthread_setname_np(s.decode_thread.native_handle(), "dec-decode");
@@ -773,6 +835,14 @@ void DecoderService::Stop() {
     if (s.live_ctx != nullptr) s.live_ctx->TryCancel();
   }
   s.publish_thread.join();
+  if (s.rest_thread.joinable()) {
+    {
+      std::lock_guard lock(s.rest_wake_mutex);
+      s.stop_rest = true;
+    }
+    s.rest_wake.notify_all();
+    s.rest_thread.join();
+  }
 }
 
 std::uint16_t DecoderService::metrics_port() const noexcept {

@@ -53,6 +53,12 @@ struct ServiceConfig {
   // The baseline's staleness limit, s (0: the default, 300 s). Tests only: a short one makes a stale
   // baseline in seconds. The hello's decoder configuration carries it.
   double max_frozen_s = 0.0;
+  // The rest file (review 10, finding 1; decode::BaselineConfig::rest_nm): "" none. While the patch is
+  // healthy, tracking and out of contact, its baseline is written here every few seconds (a new file
+  // replaces the old one whole). A decoder that starts with one refuses a start-up capture that is not that
+  // rest (a press held through a restart) and stays capturing, unhealthy, until it is. Keep it where a
+  // restart finds it (a pod's emptyDir, docs/deploy.md); delete it only when the cover has really changed.
+  std::string rest_file;
 };
 
 class DecoderService {

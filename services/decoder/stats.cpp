@@ -70,6 +70,10 @@ std::vector<MetricFamily> StatsCollectable::Collect() const {
   counter("ruffini_decoder_frames_faint_total",
           "Contact frames flagged faint: every shift below the faint level, which a baseline error gives as well.",
           s.faint_frames);
+  counter("ruffini_decoder_captures_refused_total",
+          "Start-up baseline captures refused because they were not the patch's rest (--rest-file): a press held "
+          "through a restart.",
+          s.captures_refused);
   counter("ruffini_decoder_frames_release_refused_total",
           "Gate-open frames reported as no contact after a release: below the release force while a press is recent "
           "(PipelineConfig::release_*; models that refuse faint frames).",

@@ -257,6 +257,62 @@ TEST(BaselineTest, CapturesThenFollowsUniformDriftWhilePressedAndNeverEatsAWeakP
   EXPECT_EQ(t.frozen_s(), 0.0);
 }
 
+// Review 10, finding 1: a decoder restarted under a held press captured the press as its rest. With the rest
+// reference (the baseline the patch last had at rest), a capture that differs from it on any grating by more
+// than rest_tolerance_pm, after the common mode, is refused and starts again; the patch keeps capturing until
+// the press is lifted. A uniform temperature change since (thermal ratios applied) is not a press; one grating
+// missing is not judged.
+TEST(BaselineTest, ACaptureThatIsNotThePatchsRestIsRefusedUntilItIs) {
+  BaselineConfig c;
+  c.thermal_ratio[3] = 1.02f;  // this grating moves 2 % more with temperature than the median one
+  c.rest_nm = Nominal();
+  ShiftsPm s;
+  const auto capture = [&](BaselineTracker& t, const Wavelengths& wl, int frames) {
+    for (int k = 0; k < frames; ++k) t.Update(wl, s);
+  };
+  // A press held through the restart: 12 pm on two gratings, still. Refused capture after capture.
+  Wavelengths pressed = Nominal();
+  pressed[5] += 0.012;
+  pressed[6] += 0.007;
+  BaselineTracker t(c);
+  capture(t, pressed, 10 * c.capture_frames);
+  EXPECT_EQ(t.state(), BaselineTracker::State::kCapturing);
+  EXPECT_EQ(t.captures_refused(), 10u);
+  EXPECT_NEAR(t.refused_residual_pm(), 12.0f, 0.01f);
+  // Lifted: the peaks move (the capture starts again), then rest: accepted.
+  capture(t, Nominal(), c.capture_frames);
+  EXPECT_EQ(t.state(), BaselineTracker::State::kTracking);
+  EXPECT_EQ(t.captures_refused(), 10u);
+  // 20 C warmer (+200 pm common; grating 4 +204 pm): the patch's rest, accepted at once.
+  Wavelengths warm = Nominal(0.2);
+  warm[3] += 0.004;
+  BaselineTracker w(c);
+  capture(w, warm, c.capture_frames);
+  EXPECT_EQ(w.state(), BaselineTracker::State::kTracking);
+  EXPECT_EQ(w.captures_refused(), 0u);
+  // Just over the tolerance on one grating: refused; just under: accepted.
+  for (const double off_pm : {c.rest_tolerance_pm + 0.2, c.rest_tolerance_pm - 0.2}) {
+    Wavelengths one = Nominal();
+    one[10] -= off_pm * 1e-3;
+    BaselineTracker o(c);
+    capture(o, one, c.capture_frames);
+    EXPECT_EQ(o.state() == BaselineTracker::State::kTracking, off_pm < c.rest_tolerance_pm) << off_pm;
+  }
+  // A missing grating is not judged; too few present is refused (NaN residual).
+  Wavelengths dark = pressed;
+  dark[5] = dark[6] = std::numeric_limits<double>::quiet_NaN();
+  BaselineTracker d(c);
+  capture(d, dark, c.capture_frames);
+  EXPECT_EQ(d.state(), BaselineTracker::State::kTracking);
+  Wavelengths few = Nominal();
+  for (std::size_t i = 0; i < 8; ++i) few[i] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_TRUE(std::isnan(BaselineTracker::RestResidualPm(few, Nominal(), c)));
+  // Without a reference the press is taken for the rest, as before.
+  BaselineTracker none{BaselineConfig{}};
+  capture(none, pressed, BaselineConfig{}.capture_frames);
+  EXPECT_EQ(none.state(), BaselineTracker::State::kTracking);
+}
+
 TEST(BaselineTest, RawModeFreezesOnUniformDriftCommonModeDoesNot) {
   // The paper's raw shifts: a fast uniform drift (a 1 C step: 10 pm on every grating) reads as a touch and
   // freezes the baseline; with the common mode removed nothing moves.

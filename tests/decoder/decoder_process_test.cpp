@@ -48,12 +48,13 @@ struct Sim {
   Process process;
   int stream_port = 0;
   // extra: fault flags; port: a fixed stream port (0: any).
-  static Sim Start(const std::string& dir, std::vector<std::string> extra = {}, int port = 0, double rate = 1000) {
+  static Sim Start(const std::string& dir, std::vector<std::string> extra = {}, int port = 0, double rate = 1000,
+                   const std::string& scenario = kScenario) {
     Sim s;
     fs::remove_all(dir);
     fs::create_directories(dir);
     const std::string ports = dir + "/ports";
-    std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", kScenario, "--rate-hz",
+    std::vector<std::string> args = {RUFFINI_SIM_EXE, "--scene", kScene, "--scenario", scenario, "--rate-hz",
                                      std::to_string(rate), "--command-port", "0", "--stream-port",
                                      std::to_string(port), "--ports-file", ports};
     args.insert(args.end(), extra.begin(), extra.end());
@@ -419,4 +420,81 @@ TEST_F(DecoderProcess, AnAggregatorOfAnotherRobotIsRefusedThenTheRightOneGetsThe
   EXPECT_TRUE(agg.WaitFor(HealthyHeartbeat, 15s));
 }
 
+
+// Review 10, finding 1: a decoder restarted while a press is held captured the press as its rest, was healthy
+// and out of contact, and the operator's reset cleared a STOP under the press. With --rest-file the first decoder
+// writes the patch's rest; the restarted one refuses every capture that is not that rest while the press is
+// held (unhealthy: the aggregator keeps its FAULT and refuses a reset), and becomes healthy once it is lifted. A
+// decoder started beside it without the file takes the press for its rest (the hazard, so the test can tell).
+TEST_F(DecoderProcess, ARestartUnderAHeldPressIsNotTakenForTheRest) {
+  AggregatorStub agg, agg_b, agg_c;
+  Sim sim = Sim::Start(Dir("sim"), {}, 0, 1000, kSrc + "/tests/decoder/data/held.yaml");
+  const std::string rest = Dir("rest") + ".txt";
+  fs::remove(rest);
+  Decoder a = Decoder::Start(Dir("a"), sim.stream_port, agg.address(), {"--rest-file", rest});
+  ASSERT_TRUE(rt::WaitFor([&] { return fs::exists(rest); }, 15s)) << a.process.stderr_text();
+  // The press (8 s into the scenario): once it reads above 1.5 N, the decoder goes away (SIGTERM, by pid).
+  ASSERT_TRUE(agg.WaitFor([](const std::vector<Received>& r) {
+    return std::any_of(r.begin(), r.end(), [](const Received& m) {
+      return m.message.has_contact() && m.message.contact().force_n() > 1.5f;
+    });
+  }, 20s)) << a.process.stderr_text();
+  EXPECT_EQ(a.process.Stop(), 0);
+  Decoder b = Decoder::Start(Dir("b"), sim.stream_port, agg_b.address(), {"--rest-file", rest});
+  Decoder c = Decoder::Start(Dir("c"), sim.stream_port, agg_c.address());
+  const std::string healthy = "ruffini_decoder_healthy{patch=\"forearm\"}";
+  const std::string refused = "ruffini_decoder_captures_refused_total{patch=\"forearm\"}";
+  // Without the file: healthy under the held press, and no contact.
+  ASSERT_TRUE(rt::WaitFor([&] { return Metric(Scrape(c.metrics_port), healthy) == 1.0; }, 10s)) << c.process.stderr_text();
+  // With it: capture after capture refused, never healthy, while the press is held (until 23.5 s).
+  bool b_healthy = false;
+  ASSERT_TRUE(rt::WaitFor([&] {
+    const std::string m = Scrape(b.metrics_port);
+    b_healthy = b_healthy || Metric(m, healthy) == 1.0;
+    return Metric(m, refused) >= 3.0;
+  }, 10s)) << b.process.stderr_text();
+  EXPECT_FALSE(b_healthy) << "healthy under the held press";
+  EXPECT_TRUE(std::none_of(agg_c.Snapshot().begin(), agg_c.Snapshot().end(), [](const Received& m) {
+    return m.message.has_contact() && m.message.contact().force_n() > 1.5f;
+  })) << "the decoder without the file reports the held press (then this test no longer shows the hazard)";
+  EXPECT_NE(b.process.stderr_text().find("the start-up capture must match the rest"), std::string::npos)
+      << b.process.stderr_text();
+  // Lifted (23.5 s): the rest again, captured, healthy.
+  ASSERT_TRUE(rt::WaitFor([&] { return Metric(Scrape(b.metrics_port), healthy) == 1.0; }, 25s)) << b.process.stderr_text();
+  EXPECT_EQ(b.process.Stop(), 0);
+  EXPECT_EQ(c.process.Stop(), 0);
+  // The file is the rest: four lines, this patch.
+  std::ifstream in(rest);
+  std::string first, second;
+  std::getline(in, first);
+  std::getline(in, second);
+  EXPECT_EQ(first, "ruffini-rest 1");
+  EXPECT_EQ(second, "patch forearm");
+}
+
+// A rest file that is not this patch's, or not one at all, is a clear error at start-up (exit 2 or 1 with the
+// reason), never a silently trusted capture.
+TEST_F(DecoderProcess, ABadRestFileIsAClearError) {
+  AggregatorStub agg;
+  const std::string dir = Dir("bad");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const auto run = [&](const std::string& text) {
+    std::ofstream(dir + "/rest.txt") << text;
+    Process p({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", "forearm", "--interrogator",
+               "127.0.0.1:1", "--aggregator", agg.address(), "--metrics", "127.0.0.1:0", "--rest-file",
+               dir + "/rest.txt"},
+              dir);
+    EXPECT_NE(p.WaitExit(10s), 0);
+    return p.stderr_text();
+  };
+  EXPECT_NE(run("hello\n").find("not a ruffini rest file"), std::string::npos);
+  EXPECT_NE(run("ruffini-rest 1\npatch elbow\nunix_s 1\nwavelength_nm 1\n").find("written for patch 'elbow'"),
+            std::string::npos);
+  std::string far = "ruffini-rest 1\npatch forearm\nunix_s 1\nwavelength_nm";
+  for (int i = 0; i < 16; ++i) far += " 1400";
+  EXPECT_NE(run(far + "\n").find("outside grating 1's band"), std::string::npos) << run(far + "\n");
+  EXPECT_NE(run("ruffini-rest 1\npatch forearm\nunix_s 1\nwavelength_nm 1530\n").find("fewer than 16"),
+            std::string::npos);
+}
 }  // namespace

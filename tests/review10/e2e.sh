@@ -2,8 +2,8 @@
 # Bounded end-to-end run on loopback (review 10): aggregator, controller, ruffini-sim with a scenario, one decoder
 # per patch; kills what it started, by pid. Usage (from the repository root):
 #   tests/review10/e2e.sh SCENE SCENARIO SECONDS OUTDIR
-# Prints the aggregator's latch lines. B= the binaries (default /work/main/build/release/bin).
-B=${B:-/work/main/build/release/bin}; S=$1; SC=$2; T=$3; D=$4
+# Prints the aggregator's latch lines. B= the binaries (default build/release/bin, from the repository root).
+B=${B:-build/release/bin}; S=$1; SC=$2; T=$3; D=$4
 rm -rf $D; mkdir -p $D/agg $D/sim
 pids=()
 cleanup() { for p in "${pids[@]}"; do kill -TERM $p 2>/dev/null; done; sleep 1; for p in "${pids[@]}"; do kill -KILL $p 2>/dev/null; done; }

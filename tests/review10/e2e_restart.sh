@@ -2,7 +2,7 @@
 # As e2e.sh, plus: RESTART="T_KILL T_START PATCH..." kills those patches' decoders (SIGTERM, by pid) at scenario time
 # T_KILL and starts them again at T_START; RESETS="t..." an operator's reset at those scenario times.
 # Usage (from the repository root): RESTART=... RESETS=... tests/review10/e2e_restart.sh SCENE SCENARIO SECONDS OUTDIR
-B=${B:-/work/main/build/release/bin}; S=$1; SC=$2; T=$3; D=$4
+B=${B:-build/release/bin}; S=$1; SC=$2; T=$3; D=$4
 rm -rf $D; mkdir -p $D/agg $D/sim
 pids=()
 cleanup() { for f in $D/*.pid; do [ -f $f ] && pids+=($(cat $f)); done
@@ -11,7 +11,7 @@ trap cleanup EXIT
 waitport() { for i in $(seq 1 150); do grep -q "^$2 " $1 2>/dev/null && { awk -v k=$2 '$1==k{print $2}' $1; return; }; sleep 0.1; done; echo 0; }
 at() { python3 -c "import time; print(max(0, ($1 + $2*1e9 - time.time_ns())/1e9))"; }
 decoder() {  # patch tag
-  $B/ruffini-decoder --insecure --scene $S --patch $1 --interrogator 127.0.0.1:$SP --aggregator 127.0.0.1:$AP \
+  $B/ruffini-decoder --insecure --scene $S --patch $1 --interrogator 127.0.0.1:$SP --aggregator 127.0.0.1:$AP ${REST:+--rest-file $D/rest-$1.txt} \
      --metrics 127.0.0.1:0 --rate-hz 1000 --silence-ms 100 --freshness-budget-ms 200 > $D/$2-$1.out 2> $D/$2-$1.err &
   echo $! > $D/$2-$1.pid
 }

@@ -4,7 +4,9 @@
 # 20 N (upper_arm_a) and 5 N (forearm_a) are still held on the covered interior (Y 60, R 70) for ~14 s.
 # On release the forearm decoder reads a phantom ~6.5 N contact that keeps the STOP (reset refused).
 # Run from the repository root; about 60 s. Exit 1 when the finding reproduces.
-set -u; D=${D:-/tmp/r10/f1}
+# Since stop 30 the decoders run as deployed, with --rest-file (REST=1, the default here); REST= (empty) runs them
+# without, as the review did, and reproduces the finding.
+set -u; D=${D:-/tmp/r10/f1}; export REST=${REST-1}
 RESTART="10 12 upper_arm_a forearm_a" RESETS="17 20 23 26 29 36 39" \
   timeout 200 tests/review10/e2e_restart.sh config/scenes/cobot.yaml tests/review10/held-restart.yaml 38 $D >/dev/null 2>&1
 cat $D/restarts $D/resets

@@ -7,7 +7,7 @@
 #  (b) end to end (real sim, decoders, aggregator), 2.25 N presses with the map's press shape there: about
 #      half give no STOP (20 and 21 of 36 in review 10's two runs).
 # Run from the repository root; about 3 min. Exit 1 when the claim fails.
-set -u; B=${B:-/work/main/build/release/bin}; D=${D:-/tmp/r10/f3}; mkdir -p $D tests/review10/models
+set -u; B=${B:-build/release/bin}; D=${D:-/tmp/r10/f3}; mkdir -p $D tests/review10/models
 $B/ruffini sensitivity --scene config/scenes/cobot.yaml --patch upper_arm_a --out tests/review10/models/ua-e13.rmodel \
    --edge-mm 13 --step-mm 13 --presses 20 --seed 5000 --threads 1 2>/dev/null | grep -A14 "^| Y"
 $B/ruffini check-scene --points tests/review10/scenes/r10-offgrid-map.yaml 2>&1 | grep "covered map points need\|upper_arm_a Y"

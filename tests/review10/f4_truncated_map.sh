@@ -5,7 +5,7 @@
 # (three 1-mm bands only) as GUARANTEED at 1.5 N, and 200 N / 50 N presses at edge points the shipped map marks
 # "not reported even at 200 N" give no STOP and no FAULT end to end.
 # Run from the repository root; about 70 s. Exit 1 when the scene is accepted.
-set -u; B=${B:-/work/main/build/release/bin}; D=${D:-/tmp/r10/f4}; mkdir -p tests/review10/models
+set -u; B=${B:-build/release/bin}; D=${D:-/tmp/r10/f4}; mkdir -p tests/review10/models
 for p in forearm_a forearm_b upper_arm_a; do
   $B/ruffini sensitivity --scene config/scenes/cobot.yaml --patch $p --out tests/review10/models/trunc-$p.rmodel \
      --edge-mm 20 --step-mm 30 --forces 2.25 --presses 20 --seed 6000 --threads 1 >/dev/null 2>&1

@@ -7,7 +7,7 @@
 #    same scene with its own casts' maps is refused at 1.5 (29 + 10 covered points need up to 4 N);
 # and `ruffini calibrate` (cmd_decode.cpp) refits gains/input range yet keeps the old model's maps.
 # Exit 1 when any of the three is accepted.
-set -u; B=${B:-/work/main/build/release/bin}; bad=0
+set -u; B=${B:-build/release/bin}; bad=0
 for s in r10-swap-ab r10-field-swap r10-field-labmodels r10-field-labmodels-pf15 r10-field-pf15; do
   $B/ruffini check-scene tests/review10/scenes/$s.yaml >/dev/null 2>&1; rc=$?
   echo "$s: check-scene exit $rc"; [ $rc = 0 ] && [ $s != r10-field-pf15 ] && bad=1

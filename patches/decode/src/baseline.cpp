@@ -46,6 +46,27 @@ void BaselineTracker::Seed(const Wavelengths& b) noexcept {
   frozen_frames_ = 0;
 }
 
+float BaselineTracker::RestResidualPm(const Wavelengths& b, const Wavelengths& rest, const BaselineConfig& config) noexcept {
+  std::array<double, kGratings> d{};
+  std::array<double, kGratings> sorted{};
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    d[i] = (b[i] - rest[i]) * 1e3;
+    if (std::isfinite(d[i])) sorted[n++] = d[i];
+  }
+  if (n < static_cast<std::size_t>(std::max(1, config.min_common_mode_gratings))) {
+    return std::numeric_limits<float>::quiet_NaN();
+  }
+  std::sort(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n));
+  const double median = n % 2 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (!std::isfinite(d[i])) continue;
+    worst = std::max(worst, std::abs(d[i] - static_cast<double>(config.thermal_ratio[i]) * median));
+  }
+  return static_cast<float>(worst);
+}
+
 double BaselineTracker::drift_pm() const noexcept {
   if (state_ == State::kCapturing) return 0.0;
   double sum = 0;
@@ -82,6 +103,19 @@ bool BaselineTracker::Update(const Wavelengths& wl, ShiftsPm& shift, Gate gate) 
     if (++captured_ < config_.capture_frames) return false;
     for (std::size_t i = 0; i < kGratings; ++i) {
       baseline_nm_[i] = count_[i] > 0 ? sum_nm_[i] / count_[i] : std::numeric_limits<double>::quiet_NaN();
+    }
+    if (config_.rest_nm) {
+      // Not the rest this patch last had (a press held through a restart): refused, capture again. A
+      // residual that cannot be computed (too few gratings) is refused as well.
+      const float residual = RestResidualPm(baseline_nm_, *config_.rest_nm, config_);
+      if (!(residual <= config_.rest_tolerance_pm)) {
+        ++captures_refused_;
+        refused_residual_pm_ = residual;
+        sum_nm_.fill(0.0);
+        count_.fill(0);
+        captured_ = 0;
+        return false;
+      }
     }
     captured_nm_ = baseline_nm_;
     state_ = State::kTracking;

@@ -402,7 +402,10 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
     decoders[patch] = std::make_unique<Child>(
         std::vector<std::string>{exe("ruffini-decoder"), transport, "--scene", o.scene_path, "--patch", patch, "--interrogator",
                                  "127.0.0.1:" + std::to_string(stream_port), "--aggregator", address, "--metrics",
-                                 "127.0.0.1:0", "--rate-hz", rate},
+                                 "127.0.0.1:0", "--rate-hz", rate,
+                                 // The patch's rest, as deployed: the restarted decoder's capture is checked
+                                 // against it (a press held through the restart is not taken for the rest).
+                                 "--rest-file", (run / ("rest-" + patch + ".txt")).string()},
         (run / ("decoder-" + patch)).string());
   };
   for (const auto& p : patches) start_decoder(p);

@@ -32,6 +32,7 @@
 #include <array>
 #include <cstdint>
 #include <limits>
+#include <optional>
 
 #include "ruffini/frame.h"
 
@@ -79,6 +80,15 @@ struct BaselineConfig {
   double field_max_rate_pm_s = 1.0;
   std::array<float, kGratings> grating_y_mm{};    // the gratings' places on the patch (PatchSpec)
   std::array<float, kGratings> grating_arc_mm{};  // r_deg x surface radius, mm
+  // The rest reference (review 10, finding 1): the baseline this patch last had at rest (a decoder that
+  // restarts reads it back from its rest file). A start-up capture only checks that the peaks are still, and a
+  // held press is still: a decoder restarted under a press took the press for its rest, was healthy and out of
+  // contact, and the operator's reset cleared a STOP under 20 N. With a reference, a capture whose baseline
+  // differs from it, after the common mode (each grating's thermal_ratio x the median difference), by more
+  // than rest_tolerance_pm on any grating is refused and starts again: the patch stays capturing (unhealthy,
+  // then a FAULT past the capture deadline) until what it sees is its rest again. Unset: no check.
+  std::optional<Wavelengths> rest_nm;
+  double rest_tolerance_pm = 6.0;
 
   static constexpr std::array<float, kGratings> UnitRatios() {
     std::array<float, kGratings> r{};
@@ -121,6 +131,15 @@ class BaselineTracker {
   // Baseline drift since capture: the mean over gratings of baseline - captured baseline, pm.
   [[nodiscard]] double drift_pm() const noexcept;
   [[nodiscard]] const BaselineConfig& config() const noexcept { return config_; }
+  // Captures refused because they differed from the rest reference (BaselineConfig::rest_nm), and the largest
+  // difference the last refused one showed (pm, common mode removed).
+  [[nodiscard]] std::uint64_t captures_refused() const noexcept { return captures_refused_; }
+  [[nodiscard]] float refused_residual_pm() const noexcept { return refused_residual_pm_; }
+  // The largest |difference| between a baseline and the rest reference, pm, after the common mode (the
+  // median difference, times each grating's thermal ratio); NaN when fewer than min_common_mode_gratings
+  // gratings are present in both.
+  [[nodiscard]] static float RestResidualPm(const Wavelengths& baseline_nm, const Wavelengths& rest_nm,
+                                            const BaselineConfig& config) noexcept;
   // Sets a known baseline (e.g. a dataset's reference) and starts tracking.
   void Seed(const Wavelengths& baseline_nm) noexcept;
   void Reset() noexcept;
@@ -133,6 +152,8 @@ class BaselineTracker {
   Wavelengths sum_nm_{};
   std::array<int, kGratings> count_{};
   int captured_ = 0;
+  std::uint64_t captures_refused_ = 0;
+  float refused_residual_pm_ = 0.0f;
   int quiet_frames_ = 0;
   std::int64_t frozen_frames_ = 0;
   float common_mode_pm_ = 0.0f;

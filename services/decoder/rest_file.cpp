@@ -1,0 +1,86 @@
+#include "rest_file.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "ruffini/error.h"
+
+namespace ruffini::decoder {
+
+std::int64_t UnixNowS() {
+  return std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+RestFile ReadRestFile(const std::string& path, const std::string& patch, const patch::PatchSpec& spec) {
+  const auto fail = [&](const std::string& why) { return InputError("rest file " + path + ": " + why); };
+  std::ifstream in(path);
+  if (!in) throw fail("cannot be read");
+  std::string line, word;
+  RestFile r;
+  int version = 0;
+  if (!std::getline(in, line) || std::sscanf(line.c_str(), "ruffini-rest %d", &version) != 1 || version != 1) {
+    throw fail("not a ruffini rest file of version 1 (first line '" + line.substr(0, 40) + "')");
+  }
+  if (!std::getline(in, line) || line.rfind("patch ", 0) != 0) throw fail("second line is not 'patch NAME'");
+  r.patch = line.substr(6);
+  if (r.patch != patch) throw fail("written for patch '" + r.patch + "', not '" + patch + "'");
+  if (!std::getline(in, line) || std::sscanf(line.c_str(), "unix_s %lld", reinterpret_cast<long long*>(&r.unix_s)) != 1) {
+    throw fail("third line is not 'unix_s SECONDS'");
+  }
+  if (!std::getline(in, line)) throw fail("no wavelength_nm line");
+  std::istringstream values(line);
+  values >> word;
+  if (word != "wavelength_nm") throw fail("fourth line is not 'wavelength_nm' and 16 values");
+  int present = 0;
+  for (std::size_t i = 0; i < kGratings; ++i) {
+    if (!(values >> word)) throw fail("fewer than 16 wavelengths");
+    double v = 0.0;
+    try {
+      std::size_t used = 0;
+      v = std::stod(word, &used);
+      if (used != word.size()) throw std::invalid_argument(word);
+    } catch (const std::exception&) {
+      throw fail("wavelength " + std::to_string(i + 1) + " '" + word + "' is not a number");
+    }
+    if (std::isnan(v)) {
+      r.wavelength_nm[i] = v;
+      continue;
+    }
+    const double c = spec.gratings[i].wavelength_nm, half = spec.fibre.band_half_width_nm;
+    if (!(std::abs(v - c) <= half)) {
+      throw fail("wavelength " + std::to_string(i + 1) + " " + word + " nm lies outside grating " + std::to_string(i + 1) +
+                 "'s band");
+    }
+    r.wavelength_nm[i] = v;
+    ++present;
+  }
+  if (values >> word) throw fail("more than 16 wavelengths");
+  if (present < 9) throw fail("only " + std::to_string(present) + " of 16 wavelengths present");
+  return r;
+}
+
+void WriteRestFile(const std::string& path, const std::string& patch, const Wavelengths& wavelength_nm) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::trunc);
+    if (!out) throw InputError("rest file " + tmp + ": cannot be written");
+    out << "ruffini-rest 1\npatch " << patch << "\nunix_s " << UnixNowS() << "\nwavelength_nm";
+    char buf[32];
+    for (double v : wavelength_nm) {
+      std::snprintf(buf, sizeof buf, " %.7f", v);
+      out << (std::isnan(v) ? std::string(" nan") : std::string(buf));
+    }
+    out << "\n";
+    out.flush();
+    if (!out) throw InputError("rest file " + tmp + ": write failed");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) throw InputError("rest file " + path + ": cannot replace it (" + ec.message() + ")");
+}
+
+}  // namespace ruffini::decoder
