@@ -304,7 +304,11 @@ std::string DescribeCoverage(const SceneCoverage& c, bool points) {
         << Num(r.press_factor()) << "; maps of level " << Num(r.map_level_n()) << " N; guaranteed threshold "
         << Num(r.guaranteed_threshold_n()) << " N (every press of " << Num(r.stop_force_n()) << " N or more is "
         << "reported above the level on the covered surface: " << r.covered_points() << " of " << r.points()
-        << " map points): " << (g.ok() ? "GUARANTEED" : "NOT GUARANTEED") << "\n";
+        << " map points): "
+        << (!g.ok() ? "NOT GUARANTEED"
+                    : g.covered_points == 0 ? "NOTHING COVERED (every patch accepted as uncovered: nothing is promised)"
+                                            : "GUARANTEED")
+        << "\n";
     for (const auto& id : g.unmapped) out << "  patch " << id << ": no sensitivity map at or above the threshold\n";
     for (const auto& u : g.unmeasured) out << "  " << u << "\n";
     for (const v1::AcceptedBand& b : r.accepted_bands()) {
