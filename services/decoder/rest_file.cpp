@@ -7,6 +7,8 @@
 #include <fstream>
 #include <sstream>
 
+#include <unistd.h>
+
 #include "ruffini/error.h"
 
 namespace ruffini::decoder {
@@ -22,16 +24,25 @@ RestFile ReadRestFile(const std::string& path, const std::string& patch, const p
   std::string line, word;
   RestFile r;
   int version = 0;
-  if (!std::getline(in, line) || std::sscanf(line.c_str(), "ruffini-rest %d", &version) != 1 || version != 1) {
+  // Lines may end in CR LF (a file copied through another system).
+  const auto getline = [&](std::string& l) {
+    if (!std::getline(in, l)) return false;
+    if (!l.empty() && l.back() == '\r') l.pop_back();
+    return true;
+  };
+  if (!getline(line) || std::sscanf(line.c_str(), "ruffini-rest %d", &version) != 1 || version != 1) {
     throw fail("not a ruffini rest file of version 1 (first line '" + line.substr(0, 40) + "')");
   }
-  if (!std::getline(in, line) || line.rfind("patch ", 0) != 0) throw fail("second line is not 'patch NAME'");
+  if (!getline(line) || line.rfind("patch ", 0) != 0) throw fail("second line is not 'patch NAME'");
   r.patch = line.substr(6);
   if (r.patch != patch) throw fail("written for patch '" + r.patch + "', not '" + patch + "'");
-  if (!std::getline(in, line) || std::sscanf(line.c_str(), "unix_s %lld", reinterpret_cast<long long*>(&r.unix_s)) != 1) {
+  long long unix_s = 0;
+  if (!getline(line) || std::sscanf(line.c_str(), "unix_s %lld", &unix_s) != 1) {
     throw fail("third line is not 'unix_s SECONDS'");
   }
-  if (!std::getline(in, line)) throw fail("no wavelength_nm line");
+  r.unix_s = unix_s;
+  if (r.unix_s > UnixNowS() + 86400) throw fail("written in the future (unix_s " + std::to_string(r.unix_s) + ")");
+  if (!getline(line)) throw fail("no wavelength_nm line");
   std::istringstream values(line);
   values >> word;
   if (word != "wavelength_nm") throw fail("fourth line is not 'wavelength_nm' and 16 values");
@@ -65,18 +76,20 @@ RestFile ReadRestFile(const std::string& path, const std::string& patch, const p
 
 void WriteRestFile(const std::string& path, const std::string& patch, const Wavelengths& wavelength_nm) {
   const std::string tmp = path + ".tmp";
+  std::string text = "ruffini-rest 1\npatch " + patch + "\nunix_s " + std::to_string(UnixNowS()) + "\nwavelength_nm";
+  char buf[32];
+  for (double v : wavelength_nm) {
+    std::snprintf(buf, sizeof buf, " %.7f", v);
+    text += std::isnan(v) ? std::string(" nan") : std::string(buf);
+  }
+  text += "\n";
   {
-    std::ofstream out(tmp, std::ios::trunc);
-    if (!out) throw InputError("rest file " + tmp + ": cannot be written");
-    out << "ruffini-rest 1\npatch " << patch << "\nunix_s " << UnixNowS() << "\nwavelength_nm";
-    char buf[32];
-    for (double v : wavelength_nm) {
-      std::snprintf(buf, sizeof buf, " %.7f", v);
-      out << (std::isnan(v) ? std::string(" nan") : std::string(buf));
-    }
-    out << "\n";
-    out.flush();
-    if (!out) throw InputError("rest file " + tmp + ": write failed");
+    // fsync before the rename: after a power loss the file is the old rest or the new one, not an empty one.
+    std::FILE* f = std::fopen(tmp.c_str(), "w");
+    if (f == nullptr) throw InputError("rest file " + tmp + ": cannot be written");
+    const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size() && std::fflush(f) == 0 && ::fsync(::fileno(f)) == 0;
+    std::fclose(f);
+    if (!ok) throw InputError("rest file " + tmp + ": write failed");
   }
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);

@@ -376,7 +376,9 @@ void DecoderService::Impl::RestLoop() {
       WriteRestFile(config.rest_file, patch_id, nm);
       written = version;
     } catch (const std::exception& e) {
-      spdlog::error("rest file {}: {}", config.rest_file, e.what());
+      stats.rest_file_errors.fetch_add(1, std::memory_order_relaxed);
+      spdlog::error("rest file {}: {} (a restart will trust its first capture until it is written)", config.rest_file,
+                    e.what());
     }
   }
 }
@@ -692,6 +694,15 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
                    s.config.rest_file, std::max<std::int64_t>(0, UnixNowS() - rest.unix_s),
                    s.pipeline_config.baseline.rest_tolerance_pm);
     } else {
+      // It must be writable now: a path that cannot be written would silently leave every later restart
+      // trusting its first capture (review 11).
+      const std::string probe = s.config.rest_file + ".tmp";
+      if (std::FILE* f = std::fopen(probe.c_str(), "w"); f != nullptr) {
+        std::fclose(f);
+        std::filesystem::remove(probe);
+      } else {
+        throw InputError("--rest-file " + s.config.rest_file + ": cannot be written there");
+      }
       spdlog::warn("rest file {}: none yet, so the first capture is trusted (a press held now is taken for the rest)",
                    s.config.rest_file);
     }

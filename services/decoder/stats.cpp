@@ -74,6 +74,9 @@ std::vector<MetricFamily> StatsCollectable::Collect() const {
           "Start-up baseline captures refused because they were not the patch's rest (--rest-file): a press held "
           "through a restart.",
           s.captures_refused);
+  counter("ruffini_decoder_rest_file_errors_total",
+          "Writes of the rest file (--rest-file) that failed: until one succeeds, a restart trusts its first capture.",
+          s.rest_file_errors);
   counter("ruffini_decoder_frames_release_refused_total",
           "Gate-open frames reported as no contact after a release: below the release force while a press is recent "
           "(PipelineConfig::release_*; models that refuse faint frames).",

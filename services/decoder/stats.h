@@ -23,7 +23,7 @@ using AtomicHistogram = service::AtomicHistogram;
 struct Stats {
   // Written by the decode thread (a copy of link::Monitor's health after each step).
   std::atomic<std::uint64_t> frames{0}, valid_frames{0}, serial_gaps{0}, frames_lost{0}, onsets{0}, faint_frames{0},
-      release_refused_frames{0}, captures_refused{0};
+      release_refused_frames{0}, captures_refused{0}, rest_file_errors{0};
   std::array<std::atomic<std::uint64_t>, decode::kReasonCount> decode_rejected{};
   std::array<std::atomic<std::uint64_t>, ingest::kReasonCount> stream_rejected{};
   std::array<std::atomic<std::uint64_t>, link::kFaultCodeCount> faults{};

@@ -454,7 +454,8 @@ TEST_F(DecoderProcess, ARestartUnderAHeldPressIsNotTakenForTheRest) {
     return Metric(m, refused) >= 3.0;
   }, 10s)) << b.process.stderr_text();
   EXPECT_FALSE(b_healthy) << "healthy under the held press";
-  EXPECT_TRUE(std::none_of(agg_c.Snapshot().begin(), agg_c.Snapshot().end(), [](const Received& m) {
+  const std::vector<Received> from_c = agg_c.Snapshot();
+  EXPECT_TRUE(std::none_of(from_c.begin(), from_c.end(), [](const Received& m) {
     return m.message.has_contact() && m.message.contact().force_n() > 1.5f;
   })) << "the decoder without the file reports the held press (then this test no longer shows the hazard)";
   EXPECT_NE(b.process.stderr_text().find("the start-up capture must match the rest"), std::string::npos)
@@ -496,5 +497,14 @@ TEST_F(DecoderProcess, ABadRestFileIsAClearError) {
   EXPECT_NE(run(far + "\n").find("outside grating 1's band"), std::string::npos) << run(far + "\n");
   EXPECT_NE(run("ruffini-rest 1\npatch forearm\nunix_s 1\nwavelength_nm 1530\n").find("fewer than 16"),
             std::string::npos);
+  EXPECT_NE(run("ruffini-rest 1\npatch forearm\nunix_s 99999999999\nwavelength_nm 1530\n").find("in the future"),
+            std::string::npos);
+  // A path that cannot be written (no such directory) is refused at start-up, not found out at the next restart
+  // (review 11: it silently left every restart trusting its first capture).
+  Process p({RUFFINI_DECODER_EXE, "--insecure", "--scene", kScene, "--patch", "forearm", "--interrogator", "127.0.0.1:1",
+             "--aggregator", agg.address(), "--metrics", "127.0.0.1:0", "--rest-file", dir + "/no/such/dir/rest.txt"},
+            dir);
+  EXPECT_NE(p.WaitExit(10s), 0);
+  EXPECT_NE(p.stderr_text().find("cannot be written there"), std::string::npos) << p.stderr_text();
 }
 }  // namespace

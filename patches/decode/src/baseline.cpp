@@ -67,6 +67,13 @@ float BaselineTracker::RestResidualPm(const Wavelengths& b, const Wavelengths& r
   return static_cast<float>(worst);
 }
 
+void BaselineTracker::RefuseCapture(float residual_pm) noexcept {
+  const std::uint64_t refused = captures_refused_ + 1;
+  Reset();
+  captures_refused_ = refused;
+  refused_residual_pm_ = residual_pm;
+}
+
 double BaselineTracker::drift_pm() const noexcept {
   if (state_ == State::kCapturing) return 0.0;
   double sum = 0;

@@ -140,6 +140,9 @@ class BaselineTracker {
   // gratings are present in both.
   [[nodiscard]] static float RestResidualPm(const Wavelengths& baseline_nm, const Wavelengths& rest_nm,
                                             const BaselineConfig& config) noexcept;
+  // The caller found the capture just made is not the patch's rest (the pipeline reads the difference from the
+  // rest reference as a contact): counted, and the capture starts again.
+  void RefuseCapture(float residual_pm) noexcept;
   // Sets a known baseline (e.g. a dataset's reference) and starts tracking.
   void Seed(const Wavelengths& baseline_nm) noexcept;
   void Reset() noexcept;

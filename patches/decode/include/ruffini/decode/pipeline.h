@@ -198,6 +198,7 @@ class Pipeline {
     bool over_range_ = false;  // the last frame was over range
     float recent_peak_pm_ = 0.0f;  // largest |shift| lately, decaying (quiet release after a drop)
     float recent_force_n_ = 0.0f;  // largest networks' force lately, decaying (refused after a release)
+    float rest_check_force_n_ = 0.0f;  // what the last capture read against the rest reference (RestCheck)
     TouchVerdict pair_;            // the last two-touch fit, reused for multi_refit_s while the flag holds
     int pair_age_ = 1 << 30;       // frames since it (large: none)
     ShiftsPm smooth_{};            // the shifts, smoothed over faint_smooth_s
@@ -243,6 +244,8 @@ class Pipeline {
   int Touches(const ShiftsPm& shift, PipelineOutput& out, Data& d) const noexcept;
   // A found pair's force for the stop rule (PipelineConfig::multi_force): raises out.force_n, never lowers it.
   void RaiseForPair(const TouchVerdict& v, PipelineOutput& out) const noexcept;
+  // A capture just made against the rest reference: refused when the networks read the difference as a contact.
+  void RestCheck(Data& d) const noexcept;
   // Smooths the shifts (every valid frame): whether the largest smoothed |shift| is below faint_pm.
   bool Faint(const ShiftsPm& shift, Data& d) const noexcept;
 
