@@ -46,25 +46,23 @@ void BaselineTracker::Seed(const Wavelengths& b) noexcept {
   frozen_frames_ = 0;
 }
 
+bool BaselineTracker::RestDifferencePm(const Wavelengths& b, const Wavelengths& rest, const BaselineConfig& config,
+                                       ShiftsPm& out) noexcept {
+  for (std::size_t i = 0; i < kGratings; ++i) out[i] = static_cast<float>((b[i] - rest[i]) * 1e3);  // NaN stays NaN
+  const float cm = MedianOfPresent(out, std::max(1, config.min_common_mode_gratings));
+  if (!std::isfinite(cm)) return false;
+  for (std::size_t i = 0; i < kGratings; ++i) out[i] -= config.thermal_ratio[i] * cm;
+  return true;
+}
+
 float BaselineTracker::RestResidualPm(const Wavelengths& b, const Wavelengths& rest, const BaselineConfig& config) noexcept {
-  std::array<double, kGratings> d{};
-  std::array<double, kGratings> sorted{};
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < kGratings; ++i) {
-    d[i] = (b[i] - rest[i]) * 1e3;
-    if (std::isfinite(d[i])) sorted[n++] = d[i];
+  ShiftsPm d;
+  if (!RestDifferencePm(b, rest, config, d)) return std::numeric_limits<float>::quiet_NaN();
+  float worst = 0.0f;
+  for (float v : d) {
+    if (std::isfinite(v)) worst = std::max(worst, std::abs(v));
   }
-  if (n < static_cast<std::size_t>(std::max(1, config.min_common_mode_gratings))) {
-    return std::numeric_limits<float>::quiet_NaN();
-  }
-  std::sort(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n));
-  const double median = n % 2 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
-  double worst = 0.0;
-  for (std::size_t i = 0; i < kGratings; ++i) {
-    if (!std::isfinite(d[i])) continue;
-    worst = std::max(worst, std::abs(d[i] - static_cast<double>(config.thermal_ratio[i]) * median));
-  }
-  return static_cast<float>(worst);
+  return worst;
 }
 
 void BaselineTracker::RefuseCapture(float residual_pm) noexcept {

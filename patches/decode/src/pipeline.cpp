@@ -188,36 +188,19 @@ Reason Pipeline<Scalar>::CheckRaw(const Wavelengths& wl, std::uint32_t flags) co
 // decoder sees (a 2.25 N press far from every grating moves none by 6 pm, review 11 finding 1).
 template <typename Scalar>
 void Pipeline<Scalar>::RestCheck(Data& d) const noexcept {
-  const Wavelengths& b = d.tracker_.baseline_nm();
-  const Wavelengths& rest = *config_.baseline.rest_nm;
-  std::array<float, kGratings> diff{};
-  std::array<float, kGratings> sorted{};
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < kGratings; ++i) {
-    diff[i] = static_cast<float>((b[i] - rest[i]) * 1e3);
-    if (std::isfinite(diff[i])) sorted[n++] = diff[i];
-  }
-  float median = 0.0f;
-  if (config_.baseline.common_mode && n > 0) {
-    std::sort(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n));
-    median = n % 2 ? sorted[n / 2] : 0.5f * (sorted[n / 2 - 1] + sorted[n / 2]);
-  }
   ShiftsPm shift{};
-  for (std::size_t i = 0; i < kGratings; ++i) shift[i] = diff[i] - config_.baseline.thermal_ratio[i] * median;
-  bool refuse = !InRange(shift);
+  bool refuse = !BaselineTracker::RestDifferencePm(d.tracker_.baseline_nm(), *config_.baseline.rest_nm,
+                                                   config_.baseline, shift) ||
+                !InRange(shift);
   if (!refuse) {
     decoder_.Reset(d.net_, &shift);
     const DecodeOutput o = decoder_.Decode(shift, d.net_);
     refuse = !o.valid || o.in_contact;
-    d.rest_check_force_n_ = o.force_n;
   }
   d.primed_ = false;  // the window starts afresh from the first tracked frame
   if (refuse) {
-    float worst = 0.0f;
-    for (float v : shift) {
-      if (std::isfinite(v)) worst = std::max(worst, std::abs(v));
-    }
-    d.tracker_.RefuseCapture(worst);
+    d.tracker_.RefuseCapture(BaselineTracker::RestResidualPm(d.tracker_.baseline_nm(), *config_.baseline.rest_nm,
+                                                             config_.baseline));
   }
 }
 

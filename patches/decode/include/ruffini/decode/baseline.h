@@ -135,9 +135,12 @@ class BaselineTracker {
   // difference the last refused one showed (pm, common mode removed).
   [[nodiscard]] std::uint64_t captures_refused() const noexcept { return captures_refused_; }
   [[nodiscard]] float refused_residual_pm() const noexcept { return refused_residual_pm_; }
-  // The largest |difference| between a baseline and the rest reference, pm, after the common mode (the
-  // median difference, times each grating's thermal ratio); NaN when fewer than min_common_mode_gratings
-  // gratings are present in both.
+  // A baseline's difference from the rest reference, pm, after the common mode (the median difference, times
+  // each grating's thermal ratio), NaN where a grating is missing. False when fewer than min_common_mode_gratings
+  // gratings are present in both (no common mode to remove).
+  [[nodiscard]] static bool RestDifferencePm(const Wavelengths& baseline_nm, const Wavelengths& rest_nm,
+                                             const BaselineConfig& config, ShiftsPm& out) noexcept;
+  // The largest |RestDifferencePm|; NaN when it cannot be computed.
   [[nodiscard]] static float RestResidualPm(const Wavelengths& baseline_nm, const Wavelengths& rest_nm,
                                             const BaselineConfig& config) noexcept;
   // The caller found the capture just made is not the patch's rest (the pipeline reads the difference from the

@@ -198,7 +198,6 @@ class Pipeline {
     bool over_range_ = false;  // the last frame was over range
     float recent_peak_pm_ = 0.0f;  // largest |shift| lately, decaying (quiet release after a drop)
     float recent_force_n_ = 0.0f;  // largest networks' force lately, decaying (refused after a release)
-    float rest_check_force_n_ = 0.0f;  // what the last capture read against the rest reference (RestCheck)
     TouchVerdict pair_;            // the last two-touch fit, reused for multi_refit_s while the flag holds
     int pair_age_ = 1 << 30;       // frames since it (large: none)
     ShiftsPm smooth_{};            // the shifts, smoothed over faint_smooth_s
