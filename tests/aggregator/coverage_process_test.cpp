@@ -14,6 +14,7 @@
 #include <string>
 
 #include "process.h"
+#include "sensitivity_grid.h"
 #include "ruffini/decode/model_io.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "service_process.h"
@@ -27,22 +28,11 @@ namespace fs = std::filesystem;
 
 const std::string kSrc = RUFFINI_SOURCE_DIR;
 
-// The map: Y {2, 75, 148} x R {3, 142}, within 2 mm of every edge; 2 N everywhere but (75, 142): 5 N. Level 1.5 N.
-v1::SensitivityMap Map() {
-  v1::SensitivityMap m;
-  m.set_level_n(1.5f);
-  m.set_reliability(0.95f);
-  for (double y : {2.0, 75.0, 148.0}) m.add_y_mm(y);
-  for (double r : {3.0, 142.0}) m.add_r_deg(r);
-  for (int k = 0; k < 6; ++k) {
-    m.add_min_force_n(k == 3 ? 5.0f : 2.0f);
-    m.add_location_error_mm(1.0f + static_cast<float>(k));
-  }
-  for (float f : {1.0f, 2.0f, 5.0f, 200.0f}) m.add_forces_n(f);
-  m.set_presses(20);
-  m.set_probe_radius_mm(5.5);
-  m.set_source("coverage_process_test");
-  return m;
+// The map: `ruffini sensitivity`'s grid (Y every 5 mm, arc every 5 mm, 2 mm from every edge: 31 x 20 points); 2 N
+// everywhere but (Y 75, R 141.94 deg, the last column): 5 N. Level 1.5 N.
+const double kWeakR = rt::ForearmRs().back();
+v1::SensitivityMap Map(const std::vector<double>& ys = rt::ForearmYs(), const std::vector<double>& rs = rt::ForearmRs()) {
+  return rt::GridMap(1.5f, 2.0f, 75.0, kWeakR, 5.0f, ys, rs, "coverage_process_test");
 }
 
 // A folder with the model (the shipped networks, this test's map) and a one-patch scene; `coverage` is the
@@ -101,12 +91,12 @@ TEST(CoverageProcess, ASceneBelowItsGuaranteeIsRefused) {
   const std::string err = agg.stderr_text();
   EXPECT_NE(err.find("region 'forearm' threshold 1.50 N is below what its patches guarantee, 3.33 N"), std::string::npos)
       << err;
-  EXPECT_NE(err.find("1 of 6 covered map points need more than 1.50 x 1.50 N"), std::string::npos) << err;
+  EXPECT_NE(err.find("1 of 620 covered map points need more than 1.50 x 1.50 N"), std::string::npos) << err;
   // check-scene says the same, and names the point.
   rt::Process check({RUFFINI_EXE, "check-scene", scene, "--points"}, dir);
   EXPECT_EQ(check.WaitExit(30s), 1);
   EXPECT_NE(check.stdout_text().find("NOT GUARANTEED"), std::string::npos) << check.stdout_text();
-  EXPECT_NE(check.stdout_text().find("forearm Y 75.00 mm R 142.00 deg: 5.00 N"), std::string::npos) << check.stdout_text();
+  EXPECT_NE(check.stdout_text().find("forearm Y 75.00 mm R 141.94 deg: 5.00 N"), std::string::npos) << check.stdout_text();
 }
 
 TEST(CoverageProcess, AcceptedBandsMakeItLoadAndAreListedInTheLogAndStatusWithEveryMapAndTheHello) {
@@ -131,12 +121,12 @@ TEST(CoverageProcess, AcceptedBandsMakeItLoadAndAreListedInTheLogAndStatusWithEv
   EXPECT_FLOAT_EQ(c.threshold_n(), 1.5f);
   EXPECT_FLOAT_EQ(c.stop_force_n(), 2.0f);
   EXPECT_NEAR(c.guaranteed_threshold_n(), 2.0 / 1.5, 1e-6);
-  EXPECT_EQ(c.points(), 6u);
-  EXPECT_EQ(c.covered_points(), 5u);
+  EXPECT_EQ(c.points(), 620u);
+  EXPECT_EQ(c.covered_points(), 619u);  // the weak point's cells all lie in the band
   ASSERT_EQ(c.accepted_bands_size(), 1);
   EXPECT_EQ(c.accepted_bands(0).name(), "middle");
   EXPECT_EQ(c.accepted_bands(0).patch_id(), "forearm");
-  EXPECT_EQ(c.accepted_bands(0).points(), 1u);
+  EXPECT_EQ(c.accepted_bands(0).points(), 6u);  // Y 70, 75, 80 x R 137.87, 141.94
   EXPECT_EQ(c.accepted_bands(0).uncovered_points(), 1u);
   EXPECT_EQ(c.accepted_bands(0).source(), "the test's weak point");
   ASSERT_EQ(st.patches_size(), 1);
@@ -160,20 +150,26 @@ TEST(CoverageProcess, AcceptedBandsMakeItLoadAndAreListedInTheLogAndStatusWithEv
 }
 
 // Review 10, finding 4: a map whose grid stops short of the patch's edges (here 20 mm from the Y 0 edge, and
-// 43 deg, about 28 mm, from the R end) left those strips counted as covered. The aggregator and check-scene refuse
+// 45 deg, about 30 mm, from the R end) left those strips counted as covered. The aggregator and check-scene refuse
 // the scene and name each strip never measured.
 TEST(CoverageProcess, AMapThatStopsShortOfTheEdgesIsRefusedNamingTheStrips) {
   const std::string dir = (fs::current_path() / "coverage_truncated").string();
   const std::string scene = MakeScene(dir, kBand, [](v1::DecoderModel& m) {
-    m.mutable_sensitivity(0)->set_y_mm(0, 20.0);
-    m.mutable_sensitivity(0)->set_r_deg(1, 100.0);
+    std::vector<double> ys{20.0}, rs;  // Y from 20 mm, R up to 99.6 deg
+    for (double y : rt::ForearmYs()) {
+      if (y > 20.0) ys.push_back(y);
+    }
+    for (double r : rt::ForearmRs()) {
+      if (r < 100.0) rs.push_back(r);
+    }
+    *m.mutable_sensitivity(0) = Map(ys, rs);
   });
   rt::Process agg({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", scene, "--listen", "127.0.0.1:0", "--metrics",
                    "127.0.0.1:0"},
                   dir);
   EXPECT_EQ(agg.WaitExit(10s), 1);
   const std::string err = agg.stderr_text();
-  EXPECT_NE(err.find("patch forearm: its map's grid stops 20.0 mm from the Y 0 edge"), std::string::npos) << err;
+  EXPECT_NE(err.find("patch forearm: its grid stops 20.0 mm from the Y 0 edge"), std::string::npos) << err;
   EXPECT_NE(err.find("from the R end edge"), std::string::npos) << err;
   rt::Process check({RUFFINI_EXE, "check-scene", scene}, dir);
   EXPECT_EQ(check.WaitExit(30s), 1);

@@ -5,9 +5,11 @@
 // A map, measured for one level L (a region threshold), gives at each grid point p of a patch the smallest
 // force F(p) of a ladder from which on presses are reported above L reliably. The aggregator stops on a
 // decoded force above the region's threshold T; a map of level L >= T is conservative for T (reported above
-// L is reported above T). A region guarantees T when, over its covered surface (its patches' grid points
-// outside the bands the scene accepts as uncovered), every F(p) <= press_factor x T: a press that strong
-// stops anywhere there. The smallest threshold it can guarantee is max F(p) / press_factor.
+// L is reported above T). A region's covered surface is its patches' surface outside the bands the scene accepts
+// as uncovered. The map's grid lines cut a patch into cells; every grid corner of a cell that holds covered
+// surface is judged. A region guarantees T when every judged F(p) <= press_factor x T (a press that strong
+// stops anywhere there) and every covered cell has its corners within reach (kMaxMapEdgeGapMm,
+// kMaxMapCellMm). The smallest threshold it can guarantee is max judged F(p) / press_factor.
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -56,13 +58,18 @@ struct CoveragePatch {
 // A map's grid reaches within this of each edge of its patch (`ruffini sensitivity` measures 2 mm from each
 // edge); a wider strip between an edge and the map's outermost grid line was never measured.
 inline constexpr double kMaxMapEdgeGapMm = 2.5;
+// The widest cell between two grid lines (in Y, and in arc along R) whose corners may stand for it: the
+// `ruffini sensitivity` grid's 5 mm, the spacing whose cell centres the mid-cell measurement checked
+// (docs/coverage.md, "Between the grid points"). A wider cell holding covered surface was never measured.
+inline constexpr double kMaxMapCellMm = 5.0 + 1e-6;
 
 struct BandCount {
   std::string name;
   std::uint32_t points = 0, uncovered_points = 0;
 };
 
-// A grid point on the covered surface that misses the guarantee (reliable force above press_factor x T).
+// A judged grid point that misses the guarantee (reliable force above press_factor x T). It may lie in an accepted
+// band: a corner of a covered cell is judged wherever it lies.
 struct UncoveredPoint {
   std::string patch;
   double y_mm = 0, r_deg = 0;
@@ -74,12 +81,14 @@ struct RegionGuarantee {
   double map_level_n = std::numeric_limits<double>::quiet_NaN();  // NaN: some patch has no usable map
   double stop_force_n = std::numeric_limits<double>::infinity();   // max reliable force over the covered surface
   double guaranteed_threshold_n = std::numeric_limits<double>::infinity();
-  std::uint32_t points = 0, covered_points = 0;
+  std::uint32_t points = 0;
+  std::uint32_t covered_points = 0;  // judged: the grid corners of the cells that hold covered surface
   std::vector<BandCount> bands;          // the accepted bands on this region's patches, in the scene's order
   std::vector<std::string> unmapped;     // patches whose model has no map at or above the threshold
   std::vector<UncoveredPoint> uncovered; // covered points missing the guarantee (what a band would have to accept)
-  // Covered strips the map never measured: between an edge and the map's outermost grid line, wider than
-  // kMaxMapEdgeGapMm and not inside the accepted bands (review 10, finding 4). Each makes the guarantee infinite.
+  // Covered surface the map never measured: an edge strip wider than kMaxMapEdgeGapMm (review 10, finding 4), an
+  // inner cell wider than kMaxMapCellMm or a grid beyond its patch (review 11), each holding a point outside the
+  // accepted bands. Each makes the guarantee infinite.
   std::vector<std::string> unmeasured;
   // The scene's threshold is guaranteed: no unmapped patch (unless accepted whole) and threshold_n >=
   // guaranteed_threshold_n.
