@@ -7,12 +7,16 @@
 #include <random>
 #include <sstream>
 
+#include <google/protobuf/io/coded_stream.h>
+#include <google/protobuf/io/zero_copy_stream_impl_lite.h>
+
 #include "ruffini/decode/model_io.h"
 #include "ruffini/error.h"
 #include "ruffini/robot/scene.h"
 #include "ruffini/safety/scene.h"
 #include "ruffini/scene_file.h"
 #include "ruffini/service/common.h"
+#include "ruffini/sim/scenario.h"
 #include "ruffini/twin/scene.h"
 
 namespace ruffini::aggregator {
@@ -144,6 +148,32 @@ std::string Describe(const aggregate::Setup& setup) {
 }
 
 
+std::string DecoderSha256(const v1::DecoderModel& model) {
+  v1::DecoderModel decoder = model;
+  decoder.clear_sensitivity();
+  std::string bytes;
+  google::protobuf::io::StringOutputStream raw(&bytes);
+  {
+    google::protobuf::io::CodedOutputStream coded(&raw);
+    coded.SetSerializationDeterministic(true);  // the same model, the same bytes
+    if (!decoder.SerializeToCodedStream(&coded)) throw InputError("model: cannot serialise for its digest");
+  }
+  return service::Sha256Hex(bytes);
+}
+
+void BindMap(v1::SensitivityMap& map, const std::string& scene_path, const std::string& patch,
+             const v1::DecoderModel& model) {
+  const twin::Scene scene = twin::LoadScene(scene_path);
+  const auto mounts = sim::LoadMounts(scene);
+  for (std::size_t i = 0; i < scene.patches.size(); ++i) {
+    if (scene.patches[i].name != patch) continue;
+    map.set_measured_on(sim::MeasuredOn(scene, mounts.get(), i));
+    map.set_model_sha256(DecoderSha256(model));
+    return;
+  }
+  throw InputError(scene_path + ": no patch '" + patch + "'");
+}
+
 SceneCoverage CoverageOfScene(const std::string& scene_path) {
   const SceneFile file = LoadSceneFile(scene_path);
   const safety::Config config = safety::ConfigFromScene(file);
@@ -159,6 +189,37 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
       has_model[i] = true;
     }
     out.maps.emplace_back(models[i].sensitivity().begin(), models[i].sensitivity().end());
+  }
+  // The maps that fit each patch: measured on the patch as this scene mounts it, with this model's decoder.
+  const auto mounts = sim::LoadMounts(scene);
+  std::vector<google::protobuf::RepeatedPtrField<v1::SensitivityMap>> fitting(scene.patches.size());
+  out.map_problems.assign(scene.patches.size(), "");
+  for (std::size_t i = 0; i < scene.patches.size(); ++i) {
+    if (!has_model[i] || models[i].sensitivity_size() == 0) continue;
+    const std::string here = sim::MeasuredOn(scene, mounts.get(), i);
+    const std::string digest = DecoderSha256(models[i]);
+    std::string& problem = out.map_problems[i];
+    for (const v1::SensitivityMap& m : models[i].sensitivity()) {
+      if (m.measured_on() == here && m.model_sha256() == digest) {
+        *fitting[i].Add() = m;
+        continue;
+      }
+      problem += std::string(problem.empty() ? "patch " + scene.patches[i].name + ": " : "; ") + "the map of level " + Num(m.level_n()) + " N in " +
+                 scene.patches[i].model_path + " is not used: ";
+      if (m.measured_on().empty() && m.model_sha256().empty()) {
+        problem += "it records neither the patch nor the decoder it was measured with (a map from before stop 31)";
+      } else {
+        if (m.measured_on() != here) {
+          problem += "it was measured on " + m.measured_on() + ", but here the patch is " + here;
+        }
+        if (m.model_sha256() != digest) {
+          problem += std::string(m.measured_on() != here ? "; and " : "") + "it was measured with decoder " +
+                     m.model_sha256().substr(0, 12) + ", but the model's decoder is " + digest.substr(0, 12) +
+                     " (changed since: a recalibration, an uncertainty refit or a response map)";
+        }
+      }
+      problem += "; measure it here (`ruffini sensitivity --scene " + scene_path + " --patch " + scene.patches[i].name + "`)";
+    }
   }
   std::vector<decode::UncoveredBand> bands;
   for (const auto& b : cov.accepted_uncovered) {
@@ -200,7 +261,7 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
       if (config.patches[i].region != r.name) continue;
       decode::CoveragePatch cp;
       cp.id = scene.patches[i].name;
-      cp.maps = has_model[i] ? &models[i].sensitivity() : nullptr;
+      cp.maps = has_model[i] ? &fitting[i] : nullptr;
       cp.extent_y_mm = scene.patches[i].spec.extent_y_mm;
       cp.extent_r_deg = scene.patches[i].spec.extent_r_deg;
       cp.mm_per_deg = scene.patches[i].spec.surface_radius_mm * std::numbers::pi / 180.0;
@@ -268,6 +329,10 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
           why += " (the threshold plus the stop rule's largest lowering, |sd_k| x max_sd_n = " + Num(margin) + " N)";
         }
         why += " (measure one with `ruffini sensitivity`, or accept the whole patch as uncovered)";
+        for (std::size_t i = 0; i < scene.patches.size(); ++i) {
+          const bool unmapped = std::find(g.unmapped.begin(), g.unmapped.end(), scene.patches[i].name) != g.unmapped.end();
+          if (unmapped && !out.map_problems[i].empty()) why += "; " + out.map_problems[i];
+        }
       } else if (!g.unmeasured.empty()) {
         why += "not guaranteed:";
         for (const auto& u : g.unmeasured) why += " " + u + ";";
@@ -326,6 +391,9 @@ std::string DescribeCoverage(const SceneCoverage& c, bool points) {
         }
       }
     }
+  }
+  for (const std::string& p : c.map_problems) {
+    if (!p.empty()) out << "  maps not used: " << p << "\n";
   }
   if (!c.refusal.empty()) out << "refused: " << c.refusal << "\n";
   return out.str();

@@ -29,11 +29,24 @@ struct SceneCoverage {
   std::vector<v1::RegionCoverage> regions;             // the scene's region order (AggregatorStatus.coverage)
   std::vector<decode::RegionGuarantee> guarantees;     // the same order, with the uncovered points
   std::vector<std::vector<v1::SensitivityMap>> maps;   // per scene patch, its model's maps
+  // Per scene patch, why some of its model's maps are not used here ("": all fit): measured on another patch
+  // (cast, mounting, spec) or with another decoder than the model's (review 10, finding 5).
+  std::vector<std::string> map_problems;
   std::string refusal;                                 // empty: every region's threshold is guaranteed
 };
 // Throws InputError for a malformed scene or model, or a band beyond its patch's extent; a threshold below
-// its guarantee is not thrown but said in `refusal`.
+// its guarantee is not thrown but said in `refusal`. Only the maps bound to the patch as the scene mounts it
+// and to the model's own decoder count (SensitivityMap.measured_on, model_sha256); the others are named in
+// `map_problems`, and a patch left without a map is unmapped.
 SceneCoverage CoverageOfScene(const std::string& scene_path);
+// SHA-256 (hex) of a model without its sensitivity maps: what a map's model_sha256 names.
+std::string DecoderSha256(const v1::DecoderModel& model);
+// Binds a map measured on patch `patch` of the scene (with mounts, as ruffini-sim builds it) with `model`'s
+// decoder: sets measured_on (sim::MeasuredOn) and model_sha256 (DecoderSha256). Throws InputError for an
+// unknown patch.
+void BindMap(v1::SensitivityMap& map, const std::string& scene_path, const std::string& patch,
+             const v1::DecoderModel& model);
+
 // Lines for people (the log, `ruffini check-scene`): per region its threshold, the guarantee, the accepted
 // bands; with `points`, every covered grid point that misses the guarantee.
 std::string DescribeCoverage(const SceneCoverage& coverage, bool points = false);

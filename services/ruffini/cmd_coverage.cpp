@@ -396,6 +396,8 @@ void RunSensitivity(const SensitivityArgs& a, const std::string& command) {
   m.set_source("`" + command + "`: scene " + a.scene + ", patch " + sp.name + " (its edges as ruffini-sim makes them), " +
                "twin noise and position jitter +-" + Fmt(a.jitter_mm, "%.1f") + " mm from seed " + std::to_string(a.seed) +
                " (DeriveSeed per point; held out: training used seed 1, calibration 2 and 10, test 3 and 4)");
+  // What the map is valid for: this patch as the scene mounts it, and the model's decoder (review 10, finding 5).
+  aggregator::BindMap(m, a.scene, sp.name, model);
   decode::ValidateSensitivity(m, "measured map");
   // Store: replace a map of the same level, keep the others in ascending level.
   std::vector<v1::SensitivityMap> maps;

@@ -23,10 +23,26 @@
 #include "ruffini/patch/spec_loader.h"
 #ifdef RUFFINI_HAVE_TORCH
 #include "ruffini/train/trainer.h"
+#include "scene_setup.h"
 #endif
 
 namespace ruffini::cli {
 namespace {
+
+// Writes a changed model, saying when its sensitivity maps no longer fit its decoder: no scene uses them until
+// they are measured again (aggregator::CoverageOfScene compares SensitivityMap.model_sha256; review 10, finding 5).
+void SaveChangedModel(const v1::DecoderModel& m, const std::string& out) {
+  decode::ValidateModel(m, out);
+  decode::SaveModel(out, m);
+  const std::string digest = aggregator::DecoderSha256(m);
+  int stale = 0;
+  for (const auto& map : m.sensitivity()) stale += map.model_sha256() != digest ? 1 : 0;
+  if (stale > 0) {
+    spdlog::warn("{}: {} of its {} sensitivity maps were measured with another decoder; no scene uses them until "
+                 "they are measured again (`ruffini sensitivity --scene SCENE --patch P --model {} --out {}`)",
+                 out, stale, m.sensitivity_size(), out, out);
+  }
+}
 
 #ifdef RUFFINI_HAVE_TORCH
 void RegisterTrain(CLI::App& app) {
@@ -437,8 +453,7 @@ void RegisterCalibrate(CLI::App& app) {
     if (a->faint_refuse_below_n) m.mutable_preprocessing()->set_faint_refuse_below_n(static_cast<float>(*a->faint_refuse_below_n));
     if (a->uncertainty_only) {
       *m.mutable_uncertainty() = eval::FitUncertainty(m, md.spec, cal);
-      decode::ValidateModel(m, a->out);
-      decode::SaveModel(a->out, m);
+      SaveChangedModel(m, a->out);
       print_uncertainty(m.uncertainty());
       std::printf("wrote %s (uncertainty only, %.0f s)\n", a->out.c_str(),
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
@@ -515,8 +530,7 @@ void RegisterCalibrate(CLI::App& app) {
       cc->clear_held_out_before();
       cc->clear_held_out_after();
     }
-    decode::ValidateModel(m, a->out);
-    decode::SaveModel(a->out, m);
+    SaveChangedModel(m, a->out);
     print_uncertainty(m.uncertainty());
     std::printf("wrote %s (%.0f s)\n", a->out.c_str(), seconds);
   });
@@ -558,8 +572,7 @@ void RegisterFitResponse(CLI::App& app) {
     const std::string source = "ruffini fit-response --data " + a->data + " --indentations " + std::to_string(a->indentations) +
                                " --area " + a->area + " --multiple-misfit " + std::to_string(a->multiple_misfit);
     *m.mutable_response() = decode::ToProto(r, a->multiple_misfit, source);
-    decode::ValidateModel(m, a->out);
-    decode::SaveModel(a->out, m);
+    SaveChangedModel(m, a->out);
     std::printf("response map: %d x %d nodes (Y %.1f.., R %.1f..), stiffening %.3f; wrote %s\n", r.ny, r.nr, r.y0_mm, r.r0_deg,
                 r.stiffening, a->out.c_str());
   });

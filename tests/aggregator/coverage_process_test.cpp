@@ -16,6 +16,7 @@
 #include "process.h"
 #include "sensitivity_grid.h"
 #include "ruffini/decode/model_io.h"
+#include "scene_setup.h"
 #include "ruffini/v1/aggregator.grpc.pb.h"
 #include "service_process.h"
 
@@ -38,14 +39,10 @@ v1::SensitivityMap Map(const std::vector<double>& ys = rt::ForearmYs(), const st
 // A folder with the model (the shipped networks, this test's map) and a one-patch scene; `coverage` is the
 // scene's safety.coverage section (empty: none).
 std::string MakeScene(const std::string& dir, const std::string& coverage,
-                      const std::function<void(v1::DecoderModel&)>& edit = {}) {
+                      const std::function<void(v1::DecoderModel&)>& edit = {}, bool bind = true,
+                      const std::function<void(v1::DecoderModel&)>& after_bind = {}) {
   fs::remove_all(dir);
   fs::create_directories(dir);
-  v1::DecoderModel model = ruffini::decode::LoadModel(kSrc + "/config/models/forearm.rmodel");
-  model.clear_sensitivity();
-  *model.add_sensitivity() = Map();
-  if (edit) edit(model);
-  ruffini::decode::SaveModel(dir + "/mapped.rmodel", model);
   std::ifstream in(kSrc + "/tests/fault/one-patch.yaml");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const auto replace = [&](const std::string& from, const std::string& to) {
@@ -62,6 +59,16 @@ std::string MakeScene(const std::string& dir, const std::string& coverage,
   if (from != std::string::npos && to != std::string::npos && from < to) text.erase(from, to - from);
   replace("  silence_deadline_ms: 200\n", "  silence_deadline_ms: 200\n" + coverage);
   std::ofstream(dir + "/scene.yaml") << text;
+  // The model: the shipped networks with this test's map, then `edit`; the map bound to this scene's patch and
+  // this decoder as `ruffini sensitivity` binds what it measures (unless `bind` is false); then `after_bind`.
+  v1::DecoderModel model = ruffini::decode::LoadModel(kSrc + "/config/models/forearm.rmodel");
+  model.clear_sensitivity();
+  *model.add_sensitivity() = Map();
+  if (edit) edit(model);
+  ruffini::decode::SaveModel(dir + "/mapped.rmodel", model);  // the scene must name a file that exists to load
+  if (bind) ruffini::aggregator::BindMap(*model.mutable_sensitivity(0), dir + "/scene.yaml", "forearm", model);
+  if (after_bind) after_bind(model);
+  ruffini::decode::SaveModel(dir + "/mapped.rmodel", model);
   return dir + "/scene.yaml";
 }
 
@@ -131,7 +138,9 @@ TEST(CoverageProcess, AcceptedBandsMakeItLoadAndAreListedInTheLogAndStatusWithEv
   EXPECT_EQ(c.accepted_bands(0).source(), "the test's weak point");
   ASSERT_EQ(st.patches_size(), 1);
   ASSERT_EQ(st.patches(0).sensitivity_size(), 1);
-  EXPECT_EQ(st.patches(0).sensitivity(0).SerializeAsString(), Map().SerializeAsString());
+  const v1::SensitivityMap stored = ruffini::decode::LoadModel(base + "/mapped.rmodel").sensitivity(0);
+  EXPECT_EQ(st.patches(0).sensitivity(0).SerializeAsString(), stored.SerializeAsString());
+  EXPECT_FALSE(stored.measured_on().empty());
   EXPECT_EQ(st.patches(0).hello().sensitivity_size(), 0);  // no decoder yet
 
   // A decoder: its hello carries its model's map, and GetStatus shows it.
@@ -146,7 +155,7 @@ TEST(CoverageProcess, AcceptedBandsMakeItLoadAndAreListedInTheLogAndStatusWithEv
       << agg.stderr_text() << decoder.stderr_text();
   st = Status(address);
   ASSERT_EQ(st.patches(0).hello().sensitivity_size(), 1);
-  EXPECT_EQ(st.patches(0).hello().sensitivity(0).SerializeAsString(), Map().SerializeAsString());
+  EXPECT_EQ(st.patches(0).hello().sensitivity(0).SerializeAsString(), stored.SerializeAsString());
 }
 
 // Review 10, finding 4: a map whose grid stops short of the patch's edges (here 20 mm from the Y 0 edge, and
@@ -174,6 +183,56 @@ TEST(CoverageProcess, AMapThatStopsShortOfTheEdgesIsRefusedNamingTheStrips) {
   rt::Process check({RUFFINI_EXE, "check-scene", scene}, dir);
   EXPECT_EQ(check.WaitExit(30s), 1);
   EXPECT_NE(check.stdout_text().find("never measured"), std::string::npos) << check.stdout_text();
+}
+
+// Review 10, finding 5: a scene naming another patch's or another cast's model file, or a model recalibrated
+// after its map was measured, was judged on that map. A map counts only for the patch it was measured on (the
+// spec, the cast, each edge as mounted) and the decoder it was measured with; any other is named and not used,
+// and the patch, left without a map, refuses the scene.
+TEST(CoverageProcess, AMapMeasuredElsewhereOrWithAnotherDecoderIsNotUsed) {
+  const std::string dir = (fs::current_path() / "coverage_bound").string();
+  // The same scene with the map as bound: it loads (the control).
+  rt::Process ok({RUFFINI_EXE, "check-scene", MakeScene(dir + "/ok", kBand)}, dir);
+  EXPECT_EQ(ok.WaitExit(30s), 0) << ok.stdout_text() << ok.stderr_text();
+  // Recalibrated after the map: the gratings' gains changed (as `ruffini calibrate` fits them to a cast).
+  const std::string recal = MakeScene(dir + "/recal", kBand, {}, true, [](v1::DecoderModel& m) {
+    auto* cal = m.mutable_cast_calibration();
+    cal->clear_grating_gain();
+    for (int i = 0; i < 16; ++i) cal->add_grating_gain(i == 3 ? 1.1f : 1.0f);
+  });
+  rt::Process agg({RUFFINI_AGGREGATOR_EXE, "--insecure", "--scene", recal, "--listen", "127.0.0.1:0", "--metrics",
+                   "127.0.0.1:0"},
+                  dir);
+  EXPECT_EQ(agg.WaitExit(10s), 1);
+  EXPECT_NE(agg.stderr_text().find("has no sensitivity map at or above 1.50 N"), std::string::npos) << agg.stderr_text();
+  EXPECT_NE(agg.stderr_text().find("but the model's decoder is"), std::string::npos) << agg.stderr_text();
+  // Measured on another cast.
+  const std::string moved = MakeScene(dir + "/moved", kBand, {}, true, [](v1::DecoderModel& m) {
+    std::string on = m.sensitivity(0).measured_on();
+    const auto at = on.find("cast 0");
+    ASSERT_NE(at, std::string::npos) << on;
+    on.replace(at, 6, "cast 11");  // another skin sample
+    m.mutable_sensitivity(0)->set_measured_on(on);
+  });
+  rt::Process check({RUFFINI_EXE, "check-scene", moved}, dir);
+  EXPECT_EQ(check.WaitExit(30s), 1);
+  EXPECT_NE(check.stdout_text().find("maps not used: patch forearm: the map of level 1.50 N in"), std::string::npos)
+      << check.stdout_text();
+  EXPECT_NE(check.stdout_text().find("is not used: it was measured on spec forearm ("), std::string::npos)
+      << check.stdout_text();
+  EXPECT_NE(check.stdout_text().find("), cast 11, edges not modelled, but here the patch is spec forearm ("),
+            std::string::npos)
+      << check.stdout_text();
+  // A map that records nothing (from before stop 31).
+  rt::Process old({RUFFINI_EXE, "check-scene", MakeScene(dir + "/old", kBand, {}, false)}, dir);
+  EXPECT_EQ(old.WaitExit(30s), 1);
+  EXPECT_NE(old.stdout_text().find("it records neither the patch nor the decoder"), std::string::npos) << old.stdout_text();
+  // Accepted whole, the patch needs no map: the unused one is named and the scene loads.
+  const std::string whole =
+      "  coverage:\n    press_factor: 1.5\n    source: t\n    accepted_uncovered:\n"
+      "      - {name: all, patch: forearm, y_mm: [0, 150], r_deg: [0, 145], source: t}\n";
+  rt::Process all({RUFFINI_EXE, "check-scene", MakeScene(dir + "/whole", whole, {}, false)}, dir);
+  EXPECT_EQ(all.WaitExit(30s), 0) << all.stdout_text() << all.stderr_text();
 }
 
 TEST(CoverageProcess, ABandBeyondItsPatchIsAClearError) {
@@ -243,6 +302,9 @@ TEST(CoverageProcess, ASceneWhereRefusedFaintFramesOfASeamCouldAddUpToAStopIsRef
   for (const char* p : {"forearm_a", "forearm_b"}) {
     v1::DecoderModel m = ruffini::decode::LoadModel(kSrc + "/config/models/cobot-" + p + ".rmodel");
     m.mutable_preprocessing()->set_faint_refuse_below_n(1.0f);
+    // The test's premise: the maps still hold for the refusing decoder (it refuses only below 1 N); re-stamp them
+    // so the scene is refused for the seam, not for maps measured with another decoder.
+    for (auto& map : *m.mutable_sensitivity()) map.set_model_sha256(ruffini::aggregator::DecoderSha256(m));
     ruffini::decode::SaveModel(dir + "/refusing-" + p + ".rmodel", m);
   }
   std::ifstream in(kSrc + "/config/scenes/cobot.yaml");
@@ -273,4 +335,6 @@ TEST(CoverageProcess, ASceneWhereRefusedFaintFramesOfASeamCouldAddUpToAStopIsRef
   rt::Process check({RUFFINI_EXE, "check-scene", scene}, dir);
   EXPECT_EQ(check.WaitExit(60s), 1) << "check-scene accepts two refusing models on a seam under a 1.5 N region:\n"
                                     << check.stdout_text() << check.stderr_text();
+  EXPECT_NE(check.stderr_text().find("but the patch shares a seam"), std::string::npos) << check.stderr_text();
+  EXPECT_EQ(check.stdout_text().find("maps not used"), std::string::npos) << check.stdout_text();
 }

@@ -5,6 +5,7 @@
 #include "ruffini/scene_file.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <utility>
@@ -130,6 +131,20 @@ twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mount
     if (s.b == patch) e.edges->kind[static_cast<std::size_t>(s.edge_b)] = twin::EdgeEffect::Kind::kContinued;
   }
   return e;
+}
+
+std::string MeasuredOn(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch) {
+  const patch::PatchSpec& spec = scene.patches.at(patch).spec;
+  const twin::TwinEffects e = EffectsFor(scene, mounts, patch);
+  std::string out = "spec " + spec.name + " (" + spec.Fingerprint() + "), cast " + std::to_string(e.fabrication_seed());
+  if (!e.edges) return out + ", edges not modelled";
+  static constexpr std::array<const char*, 4> kEdge = {"Y 0", "Y end", "R 0", "R end"};
+  for (std::size_t k = 0; k < kEdge.size(); ++k) {
+    const twin::EdgeEffect::Kind kind = e.edges->kind[k];
+    out += std::string(k == 0 ? ", edges " : ", ") + kEdge[k] + " " +
+           (kind == twin::EdgeEffect::Kind::kFree ? "free" : kind == twin::EdgeEffect::Kind::kBonded ? "bonded" : "continued");
+  }
+  return out;
 }
 
 ScriptedSource::ScriptedSource(const twin::Scene& scene, Scenario scenario, double rate_hz)

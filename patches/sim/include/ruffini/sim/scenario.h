@@ -83,6 +83,12 @@ std::vector<PatchLoad> ProbeLoads(const twin::Scene& scene, const MountedScene* 
 // seam, found through the mounts) made `continued` when the scene names `edges`.
 twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch);
 
+// What a sensitivity map measured on patch `patch` of this scene is valid for (SensitivityMap.measured_on): the
+// spec (name and fingerprint), the cast (the fabrication seed of EffectsFor's effects) and its four edges as
+// EffectsFor makes them (free, bonded, continued at a seam; "not modelled" without the scene's `edges`). Two
+// patches with the same text respond alike, so one map serves both (the cobot scene's two upper-arm patches).
+std::string MeasuredOn(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch);
+
 // The scene's mounts, when it has a robot section (nullptr otherwise).
 std::unique_ptr<MountedScene> LoadMounts(const twin::Scene& scene);
 
