@@ -161,13 +161,23 @@ std::string DecoderSha256(const v1::DecoderModel& model) {
   return service::Sha256Hex(bytes);
 }
 
+namespace {
+
+// SensitivityMap.measured_on: the patch as mounted (sim::MeasuredOn) and a digest of every other twin parameter
+// (sim::TwinParameters).
+std::string MeasuredOnText(const twin::Scene& scene, const sim::MountedScene* mounts, std::size_t patch) {
+  return sim::MeasuredOn(scene, mounts, patch) + ", twin " + service::Sha256Hex(sim::TwinParameters(scene)).substr(0, 16);
+}
+
+}  // namespace
+
 void BindMap(v1::SensitivityMap& map, const std::string& scene_path, const std::string& patch,
              const v1::DecoderModel& model) {
   const twin::Scene scene = twin::LoadScene(scene_path);
   const auto mounts = sim::LoadMounts(scene);
   for (std::size_t i = 0; i < scene.patches.size(); ++i) {
     if (scene.patches[i].name != patch) continue;
-    map.set_measured_on(sim::MeasuredOn(scene, mounts.get(), i));
+    map.set_measured_on(MeasuredOnText(scene, mounts.get(), i));
     map.set_model_sha256(DecoderSha256(model));
     return;
   }
@@ -188,7 +198,6 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
       models[i] = decode::LoadModel(p.model_path);
       has_model[i] = true;
     }
-    out.maps.emplace_back(models[i].sensitivity().begin(), models[i].sensitivity().end());
   }
   // The maps that fit each patch: measured on the patch as this scene mounts it, with this model's decoder.
   const auto mounts = sim::LoadMounts(scene);
@@ -196,7 +205,7 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
   out.map_problems.assign(scene.patches.size(), "");
   for (std::size_t i = 0; i < scene.patches.size(); ++i) {
     if (!has_model[i] || models[i].sensitivity_size() == 0) continue;
-    const std::string here = sim::MeasuredOn(scene, mounts.get(), i);
+    const std::string here = MeasuredOnText(scene, mounts.get(), i);
     const std::string digest = DecoderSha256(models[i]);
     std::string& problem = out.map_problems[i];
     for (const v1::SensitivityMap& m : models[i].sensitivity()) {
@@ -221,6 +230,8 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
       problem += "; measure it here (`ruffini sensitivity --scene " + scene_path + " --patch " + scene.patches[i].name + "`)";
     }
   }
+  // What the aggregator keeps of each patch's maps (GetStatus, the seams' bands: SeamsOf) is what fits it.
+  for (std::size_t i = 0; i < scene.patches.size(); ++i) out.maps.emplace_back(fitting[i].begin(), fitting[i].end());
   std::vector<decode::UncoveredBand> bands;
   for (const auto& b : cov.accepted_uncovered) {
     for (const twin::ScenePatch& p : scene.patches) {
@@ -359,7 +370,7 @@ std::string DescribeCoverage(const SceneCoverage& c, bool points) {
   for (std::size_t i = 0; i < c.regions.size(); ++i) {
     const v1::RegionCoverage& r = c.regions[i];
     const decode::RegionGuarantee& g = c.guarantees[i];
-    if (r.points() == 0 && g.unmapped.empty()) {
+    if (g.patches == 0) {
       // Nothing to guarantee: a scene may name a region none of its patches is in (a soak's --patches subset).
       out << "region " << r.region() << ": threshold " << Num(r.threshold_n()) << " N; no patch of the scene is in "
           << "this region: nothing is covered, nothing to guarantee\n";

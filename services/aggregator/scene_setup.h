@@ -28,7 +28,9 @@ std::string Describe(const aggregate::Setup& setup);
 struct SceneCoverage {
   std::vector<v1::RegionCoverage> regions;             // the scene's region order (AggregatorStatus.coverage)
   std::vector<decode::RegionGuarantee> guarantees;     // the same order, with the uncovered points
-  std::vector<std::vector<v1::SensitivityMap>> maps;   // per scene patch, its model's maps
+  // Per scene patch, its model's maps that fit it (measured on it, with its decoder): the guarantee, GetStatus and
+  // the seams' bands (SeamsOf) use these alone.
+  std::vector<std::vector<v1::SensitivityMap>> maps;
   // Per scene patch, why some of its model's maps are not used here ("": all fit): measured on another patch
   // (cast, mounting, spec) or with another decoder than the model's (review 10, finding 5).
   std::vector<std::string> map_problems;

@@ -298,6 +298,13 @@ TEST_F(SafetyScene, CoverageIsValidated) {
   EXPECT_THAT(Message(p), HasSubstr("must be [min, max] with min <= max"));
   p = band("{name: e, patch: a, y_mm: [0, 1], r_deg: [0, 1]}");
   EXPECT_THAT(Message(p), HasSubstr("'safety.coverage.accepted_uncovered[0].source' is missing: say why this band"));
+  // At most 256 bands (review 12: the scene check's cost grows with the cube of the bands crossing one cell).
+  std::string many;
+  for (int i = 0; i < 257; ++i) {
+    many += "      - {name: b" + std::to_string(i) + ", y_mm: [0, 1], r_deg: [0, 1], source: x}\n";
+  }
+  p = Write("arm", "arm", kArm, "  coverage:\n    source: why\n    accepted_uncovered:\n" + many);
+  EXPECT_THAT(Message(p), HasSubstr("names 257 bands; at most 256"));
   p = Write("arm", "arm", kArm, "  coverage:\n    source: why\n    accepted_uncovered:\n"
                                 "      - {name: e, patch: a, y_mm: [0, 1], r_deg: [0, 1], source: x}\n"
                                 "      - {name: e, patch: b, y_mm: [0, 1], r_deg: [0, 1], source: x}\n");

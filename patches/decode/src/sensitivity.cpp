@@ -151,6 +151,7 @@ RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const
   RegionGuarantee g;
   g.threshold_n = threshold_n;
   g.press_factor = press_factor;
+  g.patches = static_cast<std::uint32_t>(patches.size());
   // The bands on any of the region's patches, in the scene's order; band_index maps a band to its entry.
   std::vector<int> band_index(bands.size(), -1);
   for (std::size_t b = 0; b < bands.size(); ++b) {

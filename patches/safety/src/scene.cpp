@@ -142,7 +142,15 @@ Config ConfigFromScene(const SceneFile& scene) {
     cov.press_factor = m->NumberOr("press_factor", cov.press_factor, 1.0, 100.0);
     cov.source = Source(*m, "this press factor");
     if (m->Has("accepted_uncovered")) {
-      for (YamlReader& b : m->Sequence("accepted_uncovered")) {
+      std::vector<YamlReader> bands = m->Sequence("accepted_uncovered");
+      // The scene check cuts every map cell at the band edges inside it, a cost that grows with the cube of the
+      // bands crossing one cell (review 12: 2 x 1600 bands took 7 s a load); a scene names a handful.
+      constexpr std::size_t kMaxBands = 256;
+      if (bands.size() > kMaxBands) {
+        m->Fail("accepted_uncovered", "names " + std::to_string(bands.size()) + " bands; at most " +
+                                          std::to_string(kMaxBands) + " (merge them into fewer, larger bands)");
+      }
+      for (YamlReader& b : bands) {
         CoverageConfig::Band band;
         band.name = b.String("name");
         for (const auto& other : cov.accepted_uncovered) {

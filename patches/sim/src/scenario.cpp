@@ -1,5 +1,7 @@
 #include "ruffini/sim/scenario.h"
 
+#include <yaml-cpp/yaml.h>
+
 #include "ruffini/robot/mount.h"
 #include "ruffini/robot/scene.h"
 #include "ruffini/scene_file.h"
@@ -145,6 +147,13 @@ std::string MeasuredOn(const twin::Scene& scene, const MountedScene* mounts, std
            (kind == twin::EdgeEffect::Kind::kFree ? "free" : kind == twin::EdgeEffect::Kind::kBonded ? "bonded" : "continued");
   }
   return out;
+}
+
+std::string TwinParameters(const twin::Scene& scene) {
+  const YAML::Node file = YAML::LoadFile(scene.source);
+  const YAML::Node twin = file["twin"];
+  if (!twin) return "";
+  return "effects:\n" + YAML::Dump(twin["effects"]) + "\nprobe:\n" + YAML::Dump(twin["probe"]) + "\n";
 }
 
 ScriptedSource::ScriptedSource(const twin::Scene& scene, Scenario scenario, double rate_hz)

@@ -81,6 +81,7 @@ struct RegionGuarantee {
   double map_level_n = std::numeric_limits<double>::quiet_NaN();  // NaN: some patch has no usable map
   double stop_force_n = std::numeric_limits<double>::infinity();   // max reliable force over the covered surface
   double guaranteed_threshold_n = std::numeric_limits<double>::infinity();
+  std::uint32_t patches = 0;  // the region's patches
   std::uint32_t points = 0;
   std::uint32_t covered_points = 0;  // judged: the grid corners of the cells that hold covered surface
   std::vector<BandCount> bands;          // the accepted bands on this region's patches, in the scene's order

@@ -88,6 +88,11 @@ twin::TwinEffects EffectsFor(const twin::Scene& scene, const MountedScene* mount
 // EffectsFor makes them (free, bonded, continued at a seam; "not modelled" without the scene's `edges`). Two
 // patches with the same text respond alike, so one map serves both (the cobot scene's two upper-arm patches).
 std::string MeasuredOn(const twin::Scene& scene, const MountedScene* mounts, std::size_t patch);
+// Every parameter of the twin a map was measured with besides those (review 12, finding 1: the noise, the cast's
+// fabrication parameters, irregular gratings, stiffening, temperature, creep, faults, the edges' gains, the
+// probe): the scene file's `twin.effects` and `twin.probe` as YAML (re-emitted: comments and spacing do not
+// count, the order of keys does). Empty without a twin section. A map records a digest of it.
+std::string TwinParameters(const twin::Scene& scene);
 
 // The scene's mounts, when it has a robot section (nullptr otherwise).
 std::unique_ptr<MountedScene> LoadMounts(const twin::Scene& scene);
