@@ -82,6 +82,8 @@ void Hello(Canonical& c, const v1::PatchHello& h) noexcept {
     c.U32(m.presses());
     c.F64(m.probe_radius_mm());
     c.Str(m.source());
+    c.Str(m.measured_on());   // stop 31: what the map is bound to (docs/coverage.md)
+    c.Str(m.model_sha256());
   }
 }
 
