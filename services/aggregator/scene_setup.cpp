@@ -163,11 +163,14 @@ std::string DecoderSha256(const v1::DecoderModel& model) {
 
 namespace {
 
-// SensitivityMap.measured_on: the patch as mounted (sim::MeasuredOn) and a digest of every other twin parameter
-// (sim::TwinParameters).
-std::string MeasuredOnText(const twin::Scene& scene, const sim::MountedScene* mounts, std::size_t patch) {
-  return sim::MeasuredOn(scene, mounts, patch) + ", twin " + service::Sha256Hex(sim::TwinParameters(scene)).substr(0, 16);
+// SensitivityMap.measured_on: the patch as mounted (sim::MeasuredOn) and twin_digest, TwinDigest(scene).
+std::string MeasuredOnText(const twin::Scene& scene, const sim::MountedScene* mounts, std::size_t patch,
+                           const std::string& twin_digest) {
+  return sim::MeasuredOn(scene, mounts, patch) + ", twin " + twin_digest;
 }
+// A digest of every twin parameter besides the patch's cast and edges (sim::TwinParameters; the scene file is read
+// again, so once per scene).
+std::string TwinDigest(const twin::Scene& scene) { return service::Sha256Hex(sim::TwinParameters(scene)).substr(0, 16); }
 
 }  // namespace
 
@@ -177,7 +180,7 @@ void BindMap(v1::SensitivityMap& map, const std::string& scene_path, const std::
   const auto mounts = sim::LoadMounts(scene);
   for (std::size_t i = 0; i < scene.patches.size(); ++i) {
     if (scene.patches[i].name != patch) continue;
-    map.set_measured_on(MeasuredOnText(scene, mounts.get(), i));
+    map.set_measured_on(MeasuredOnText(scene, mounts.get(), i, TwinDigest(scene)));
     map.set_model_sha256(DecoderSha256(model));
     return;
   }
@@ -203,9 +206,10 @@ SceneCoverage CoverageOfScene(const std::string& scene_path) {
   const auto mounts = sim::LoadMounts(scene);
   std::vector<google::protobuf::RepeatedPtrField<v1::SensitivityMap>> fitting(scene.patches.size());
   out.map_problems.assign(scene.patches.size(), "");
+  const std::string twin_digest = TwinDigest(scene);
   for (std::size_t i = 0; i < scene.patches.size(); ++i) {
     if (!has_model[i] || models[i].sensitivity_size() == 0) continue;
-    const std::string here = MeasuredOnText(scene, mounts.get(), i);
+    const std::string here = MeasuredOnText(scene, mounts.get(), i, twin_digest);
     const std::string digest = DecoderSha256(models[i]);
     std::string& problem = out.map_problems[i];
     for (const v1::SensitivityMap& m : models[i].sensitivity()) {

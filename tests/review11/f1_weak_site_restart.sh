@@ -3,7 +3,7 @@
 # moves no grating by more than 6 pm after the common mode. 5 N / 10 N / 5 N / 2.25 N held on the covered surface
 # (sites from probe_shift.cpp), each STOPs at onset; the four decoders (with --rest-file, files present) are
 # restarted under the presses, accept the capture, and the operator's reset at t 17 s is accepted: CLEAR under
-# the presses. Run from the repository root (/work/main or a worktree with build/release/bin); ~60 s.
+# the presses. Run from the repository root (a checkout with build/release/bin); ~60 s.
 # Exit 1 while it reproduces.
 set -u; D=${D:-/tmp/r11/f1}; export REST=1
 H=$(dirname "$0")

@@ -196,19 +196,18 @@ RegionGuarantee GuaranteeRegion(const std::vector<CoveragePatch>& patches, const
     std::vector<std::string> problems;
     for (std::size_t i = 0; i + 1 < ay.lines.size(); ++i) {
       for (std::size_t j = 0; j + 1 < ar.lines.size(); ++j) {
-        const double y0 = std::min(ay.lines[i], ay.lines[i + 1]), y1 = std::max(ay.lines[i], ay.lines[i + 1]);
-        const double r0 = std::min(ar.lines[j], ar.lines[j + 1]), r1 = std::max(ar.lines[j], ar.lines[j + 1]);
-        // A cell of no area is part of its neighbours' closures; beyond the patch is judged by the problem.
+        // A grid value beyond the patch leaves a cell whose lines run backwards: refused whatever the bands say.
         const bool beyond = !(ay.lines[i + 1] >= ay.lines[i]) || !(ar.lines[j + 1] >= ar.lines[j]);
-        if (!beyond && (!(y1 > y0) || !(r1 > r0))) continue;
-        if (!HoldsCoveredSurface(std::max(0.0, y0), std::min(p.extent_y_mm, y1), std::max(0.0, r0),
-                                 std::min(p.extent_r_deg, r1), bands, mine) &&
-            !beyond) {
-          continue;
+        if (!beyond) {
+          const double y0 = std::max(0.0, ay.lines[i]), y1 = std::min(p.extent_y_mm, ay.lines[i + 1]);
+          const double r0 = std::max(0.0, ar.lines[j]), r1 = std::min(p.extent_r_deg, ar.lines[j + 1]);
+          if (!(y1 > y0) || !(r1 > r0)) continue;  // no area: part of its neighbours' closures
+          if (!HoldsCoveredSurface(y0, y1, r0, r1, bands, mine)) continue;
         }
         const std::string& why = !ay.problem[i].empty() ? ay.problem[i] : ar.problem[j];
         if (!why.empty()) {
-          const std::string text = "patch " + p.id + ": " + why + ", and covered surface lies there: never measured";
+          const std::string text = "patch " + p.id + ": " + why + (beyond ? "" : ", and covered surface lies there") +
+                                   ": never measured";
           if (std::find(problems.begin(), problems.end(), text) == problems.end()) problems.push_back(text);
           continue;
         }
