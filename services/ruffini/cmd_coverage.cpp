@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -15,6 +16,7 @@
 #include <mutex>
 #include <numbers>
 #include <random>
+#include <span>
 #include <sstream>
 #include <thread>
 #include <utility>
@@ -88,11 +90,11 @@ class PatchUnderTest {
 // One frame as ruffini-sim puts it on the wire: the twin's shifts under `c` (or none) read by the interrogator
 // simulation, the channel's peaks in ascending order, a lost one left out (a Hyperion stream carries no
 // saturation flag, so the twin's own flags never reach the decoder), encoded as Hyperion bytes.
-std::vector<std::uint8_t> WireFrame(const twin::SkinTwin& tw, twin::InterrogatorSim& sim, const twin::Contact* c,
-                                    double t_s, std::uint64_t serial) {
+std::vector<std::uint8_t> WireFrame(const twin::SkinTwin& tw, twin::InterrogatorSim& sim,
+                                    std::span<const twin::Contact> contacts, double t_s, std::uint64_t serial) {
   twin::Shifts s{};
   std::uint32_t flags = 0;
-  if (c != nullptr) tw.StrainShiftsPm(std::span<const twin::Contact>(c, 1), s, flags);
+  if (!contacts.empty()) tw.StrainShiftsPm(contacts, s, flags);
   Wavelengths wl{};
   sim.Read(t_s, s, wl, flags);
   return ingest::EncodeWavelengths(serial, kEpochNs + static_cast<std::int64_t>(t_s * 1e9), 0, wl);
@@ -238,7 +240,8 @@ class PointProbe {
   // One frame as the decoder service gets it: what ruffini-sim puts on the wire (WireFrame), through the
   // ingest codec, into the pipeline. A frame the codec rejects reports nothing.
   decode::PipelineOutput Frame(const twin::Contact* c, double /*w*/) {
-    const std::vector<std::uint8_t> bytes = WireFrame(twin_, sim_, c, t_s_, serial_++);
+    const std::vector<std::uint8_t> bytes =
+        WireFrame(twin_, sim_, c == nullptr ? std::span<const twin::Contact>() : std::span<const twin::Contact>(c, 1), t_s_, serial_++);
     t_s_ += 1.0 / a_.rate_hz;
     std::span<const std::uint8_t> rest(bytes);
     decode::PipelineOutput out;
@@ -511,7 +514,11 @@ struct TargetsArgs {
   double slow_step_mm = 10.0, slow_rate_n_per_s = 0.15, slow_top_n = 3.0, band = 0.15;
   double reliability = 0.95;  // firm presses: as the sensitivity map's
   unsigned presses = 20, threads = 1;
-  std::uint64_t seed = 1100;  // light presses; slow seed + 1, firm seed + 2
+  std::uint64_t seed = 1100;  // light presses; slow seed + 1, firm seed + 2, pair seed + 3 (grid points) and + 4 (cell centres)
+  std::vector<double> pair_forces_n{5.0, 20.0, 50.0, 200.0};
+  std::array<double, 2> pair_light_n{0.5, 1.2};
+  unsigned pair_presses = 3;
+  std::string pair_at = "both";  // grid, centres or both
   double sd_k = 0.0;  // with sd_k_set: overrides the scene's safety.stop_rule.sd_k
   bool sd_k_set = false;
 };
@@ -584,7 +591,11 @@ class MonitoredStream {
 
   // One frame under `c` (or untouched); the first stop cause among the messages it made.
   StopCause Frame(const twin::Contact* c) {
-    const std::vector<std::uint8_t> bytes = WireFrame(twin_, sim_, c, t_s_, serial_);
+    return Frame(c == nullptr ? std::span<const twin::Contact>() : std::span<const twin::Contact>(c, 1));
+  }
+  // One frame under every probe of `contacts` at once (none: untouched).
+  StopCause Frame(std::span<const twin::Contact> contacts) {
+    const std::vector<std::uint8_t> bytes = WireFrame(twin_, sim_, contacts, t_s_, serial_);
     const link::Now now = Clock();
     sink_.first = StopCause::kNone;
     std::span<const std::uint8_t> rest(bytes);
@@ -1014,6 +1025,176 @@ std::string RunFirm(const PatchUnderTest& put, const StopRule& rule, const Bands
   return rep.str();
 }
 
+// Hard presses with a light second touch (review 10 finding 2: a light touch elsewhere on the patch hid a 20 N
+// press at a covered corner). At every point of the map's grid, each force of pair_forces_n pressed
+// pair_presses times, each time while a light touch (pair_light_n, uniform) is held at a random point of the
+// patch at least kPairApartMm away: the light touch comes on 0.3 s before the hard press (ramp 0.05 s), the
+// hard press ramps over 0.3 s, holds 0.5 s and releases over 0.3 s, then the light touch is lifted. A hard
+// press stops when a message from its start to the end of its release would stop the aggregator; a stop
+// before it (the light touch alone) is counted apart and does not count for it.
+constexpr double kPairApartMm = 30.0;
+
+struct PairPoint {
+  std::vector<unsigned> stopped;    // per force: hard presses with a stop from their start
+  std::vector<float> max_force_n;   // per force: the largest contact force sent while the hard press was on
+  unsigned light_stops = 0;         // presses whose light touch alone stopped before the hard press came
+  StopCause start = StopCause::kNone;
+};
+
+PairPoint MeasurePair(const PatchUnderTest& put, const StopRule& rule, const TargetsArgs& a, double y_mm, double r_deg,
+                      std::uint64_t seed) {
+  MonitoredStream s(put, rule, a.rate_hz, seed);
+  std::mt19937_64 rng(twin::DeriveSeed(seed, 7));
+  std::uniform_real_distribution<double> uy(0.0, put.spec().extent_y_mm), ur(0.0, put.spec().extent_r_deg),
+      lf(a.pair_light_n[0], a.pair_light_n[1]);
+  PairPoint out;
+  out.stopped.assign(a.pair_forces_n.size(), 0);
+  out.max_force_n.assign(a.pair_forces_n.size(), 0.0f);
+  out.start = UntouchedStart(s, a.rate_hz);
+  const double rest = 0.3, lead = 0.3, ramp = 0.3, hold = 0.5, release = 0.3, lift = 0.05, tail = 0.05;
+  for (std::size_t f = 0; f < a.pair_forces_n.size(); ++f) {
+    for (unsigned p = 0; p < a.pair_presses; ++p) {
+      double ly = 0, lr = 0;
+      for (int tries = 0; tries < 1000; ++tries) {
+        ly = uy(rng);
+        lr = ur(rng);
+        if (std::hypot(ly - y_mm, (lr - r_deg) * put.mm_per_deg()) >= kPairApartMm) break;
+      }
+      const double light_n = lf(rng);
+      for (int k = 0; k < static_cast<int>(rest * a.rate_hz); ++k) s.Frame(nullptr);
+      s.TakeForces();
+      StopCause before = StopCause::kNone, during = StopCause::kNone;
+      const double t_hard = lead, t_end = lead + ramp + hold + release;
+      const int n = static_cast<int>((t_end + lift + tail) * a.rate_hz);
+      for (int k = 0; k < n; ++k) {
+        const double t = k / a.rate_hz;
+        double wl = std::min(1.0, t / 0.05), wh = 0.0;
+        if (t > t_end) wl = std::max(0.0, 1.0 - (t - t_end) / lift);
+        if (t >= t_hard && t < t_hard + ramp) wh = (t - t_hard) / ramp;
+        else if (t >= t_hard + ramp && t <= t_hard + ramp + hold) wh = 1.0;
+        else if (t > t_hard + ramp + hold && t < t_end) wh = 1.0 - (t - t_hard - ramp - hold) / release;
+        std::vector<twin::Contact> on;
+        if (wl > 0) on.push_back(twin::Contact{{ly, lr}, wl * light_n, put.scene().probe});
+        if (wh > 0) on.push_back(twin::Contact{{y_mm, r_deg}, wh * a.pair_forces_n[f], put.scene().probe});
+        if (k == static_cast<int>(t_hard * a.rate_hz)) s.TakeForces();
+        const StopCause c = s.Frame(on);
+        if (t < t_hard) {
+          if (before == StopCause::kNone) before = c;
+        } else if (t <= t_end && during == StopCause::kNone) {
+          during = c;
+        }
+        if (k + 1 == static_cast<int>(t_end * a.rate_hz)) out.max_force_n[f] = std::max(out.max_force_n[f], s.TakeForces().max_n);
+      }
+      out.light_stops += before != StopCause::kNone ? 1 : 0;
+      out.stopped[f] += during != StopCause::kNone ? 1 : 0;
+    }
+  }
+  return out;
+}
+
+// One grid of hard points: the map's grid points (centres false) or its cells' centres (seed + 1).
+std::string RunPairOn(const PatchUnderTest& put, const StopRule& rule, const Bands& bands, const TargetsArgs& a,
+                      bool centres, const std::string& base) {
+  const Grid corners = MakeGrid(put, a.step_mm, a.edge_mm);
+  Grid g = corners;
+  if (centres) {
+    g = Grid{};
+    for (std::size_t i = 0; i + 1 < corners.ys.size(); ++i) g.ys.push_back(0.5 * (corners.ys[i] + corners.ys[i + 1]));
+    for (std::size_t i = 0; i + 1 < corners.rs.size(); ++i) g.rs.push_back(0.5 * (corners.rs[i] + corners.rs[i + 1]));
+  }
+  const std::string where = centres ? "the centres of the " + std::to_string(g.size()) + " cells of the map's grid (" +
+                                          GridText(corners, a.step_mm, a.edge_mm) + ")"
+                                    : GridText(g, a.step_mm, a.edge_mm);
+  const std::size_t n = g.size(), nf = a.pair_forces_n.size();
+  const std::uint64_t seed = a.seed + (centres ? 4 : 3);
+  spdlog::info("hard presses with a light touch on {}: {} points x {} forces x {} presses, light touch {}-{} N, seeds "
+               "DeriveSeed({}, point)", put.name(), n, nf, a.pair_presses, a.pair_light_n[0], a.pair_light_n[1], seed);
+  std::vector<PairPoint> res(n);
+  ParallelFor(n, a.threads, "hard + light " + put.name(), [&](std::size_t k) {
+    res[k] = MeasurePair(put, rule, a, g.y(k), g.r(k), twin::DeriveSeed(seed, k));
+  });
+  std::ostringstream rep;
+  rep << "## Hard presses with a light second touch, at " << (centres ? "the map's cell centres" : "the map's grid points") << "\n\n"
+      << "At each of " << where << ", " << a.pair_presses << " presses of each of";
+  for (double f : a.pair_forces_n) rep << " " << Fmt(f, "%g");
+  rep << " N, each while a light touch of " << Fmt(a.pair_light_n[0], "%g") << "-" << Fmt(a.pair_light_n[1], "%g")
+      << " N (uniform) is held at a random point of the patch at least " << Fmt(kPairApartMm, "%g")
+      << " mm away (it comes on 0.3 s before; the hard press ramps 0.3 s, holds 0.5 s, releases 0.3 s; one stream per "
+         "point after a 1.2 s untouched start; seeds DeriveSeed(" << seed << ", point), held out). A hard press stops "
+         "when a message from its start to the end of its release would stop the aggregator; a stop caused by the "
+         "light touch alone, before it, does not count for it.\n\n"
+      << "| force, N | covered points where every press stopped (target: all) | presses on the covered surface without a "
+         "stop | all points where every press stopped |\n| --- | --- | --- | --- |\n";
+  std::vector<std::size_t> failing;
+  std::size_t covered = 0;
+  for (std::size_t k = 0; k < n; ++k) covered += bands.Holding(g.y(k), g.r(k)) == nullptr ? 1 : 0;
+  for (std::size_t f = 0; f < nf; ++f) {
+    std::size_t covered_ok = 0, covered_missed = 0, all_ok = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const bool ok = res[k].stopped[f] == a.pair_presses;
+      all_ok += ok ? 1 : 0;
+      if (bands.Holding(g.y(k), g.r(k)) != nullptr) continue;
+      covered_ok += ok ? 1 : 0;
+      covered_missed += a.pair_presses - res[k].stopped[f];
+    }
+    rep << "| " << Fmt(a.pair_forces_n[f], "%g") << " | " << covered_ok << " of " << covered << " (" << Pct(covered_ok, covered)
+        << ") | " << covered_missed << " of " << covered * a.pair_presses << " | " << all_ok << " of " << n << " ("
+        << Pct(all_ok, n) << ") |\n";
+  }
+  std::size_t light_stops = 0, start = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    light_stops += res[k].light_stops;
+    start += res[k].start != StopCause::kNone ? 1 : 0;
+    if (bands.Holding(g.y(k), g.r(k)) != nullptr) continue;
+    for (std::size_t f = 0; f < nf; ++f) {
+      if (res[k].stopped[f] < a.pair_presses) {
+        failing.push_back(k);
+        break;
+      }
+    }
+  }
+  rep << "\nThe light touch alone stopped before the hard press in " << light_stops << " of " << n * nf * a.pair_presses
+      << " presses (" << Pct(light_stops, n * nf * a.pair_presses) << "); " << start
+      << " streams stopped in their untouched start.\n\n";
+  if (!failing.empty()) {
+    rep << "Covered points where a hard press did not stop (" << failing.size() << "):\n\n| Y mm | R deg |";
+    for (double f : a.pair_forces_n) rep << " " << Fmt(f, "%g") << " N: stopped, largest force sent |";
+    rep << "\n| --- | --- |";
+    for (std::size_t f = 0; f < nf; ++f) rep << " --- |";
+    rep << "\n";
+    for (std::size_t k : failing) {
+      rep << "| " << Fmt(g.y(k), "%.1f") << " | " << Fmt(g.r(k), "%.1f") << " |";
+      for (std::size_t f = 0; f < nf; ++f) {
+        rep << " " << res[k].stopped[f] << " of " << a.pair_presses << ", " << Fmt(res[k].max_force_n[f]) << " N |";
+      }
+      rep << "\n";
+    }
+    rep << "\n";
+  }
+  if (!base.empty()) {
+    std::vector<double> share(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      unsigned least = a.pair_presses;
+      for (std::size_t f = 0; f < nf; ++f) least = std::min(least, res[k].stopped[f]);
+      share[k] = static_cast<double>(least) / a.pair_presses;
+    }
+    const std::string file = put.name() + (centres ? "-pair-centres.svg" : "-pair.svg");
+    SaveGridHeat(g.ys, g.rs, share, put, 0.0, 1.0, "share of hard presses that STOP, the weakest force's (1: all)",
+                 put.name() + ": hard presses with a light second touch that STOP" + (centres ? " (cell centres)" : ""),
+                 a.report + "/" + file);
+    rep << "Figure: `" << file << "` (at each point, the share of presses that stop at its weakest force).\n\n";
+  }
+  return rep.str();
+}
+
+std::string RunPair(const PatchUnderTest& put, const StopRule& rule, const Bands& bands, const TargetsArgs& a,
+                    const std::string& base) {
+  std::string rep;
+  if (a.pair_at != "centres") rep += RunPairOn(put, rule, bands, a, false, base);
+  if (a.pair_at != "grid") rep += RunPairOn(put, rule, bands, a, true, base);
+  return rep;
+}
+
 std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const Bands& bands, const TargetsArgs& a,
                     const std::string& base) {
   if (a.slow_top_n <= rule.threshold_n * (1 + a.band)) {
@@ -1141,8 +1322,15 @@ std::string RunSlow(const PatchUnderTest& put, const StopRule& rule, const Bands
 }
 
 void RunTargets(const TargetsArgs& a, const std::string& command) {
-  if (a.target != "light" && a.target != "slow" && a.target != "both" && a.target != "firm" && a.target != "all") {
-    throw InputError("--target must be light, slow, both (light and slow), firm or all (got '" + a.target + "')");
+  if (a.target != "light" && a.target != "slow" && a.target != "both" && a.target != "firm" && a.target != "pair" &&
+      a.target != "all") {
+    throw InputError("--target must be light, slow, both (light and slow), firm, pair or all (got '" + a.target + "')");
+  }
+  if (a.pair_at != "grid" && a.pair_at != "centres" && a.pair_at != "both") {
+    throw InputError("--pair-at must be grid, centres or both (got '" + a.pair_at + "')");
+  }
+  if (!(a.pair_light_n[0] >= 0 && a.pair_light_n[1] >= a.pair_light_n[0])) {
+    throw InputError("--pair-light-n: the light touch's range must be two forces, the first not above the second");
   }
   const PatchUnderTest put(a.scene, a.patch, a.model);
   // The scene's safety section (thresholds, input limits, accepted bands); a scene without one needs
@@ -1195,6 +1383,7 @@ void RunTargets(const TargetsArgs& a, const std::string& command) {
   if (a.target == "light" || a.target == "both" || a.target == "all") rep << RunLight(put, rule, bands, a, base);
   if (a.target == "slow" || a.target == "both" || a.target == "all") rep << RunSlow(put, rule, bands, a, base);
   if (a.target == "firm" || a.target == "all") rep << RunFirm(put, rule, bands, a, safety.coverage.press_factor, base);
+  if (a.target == "pair" || a.target == "all") rep << RunPair(put, rule, bands, a, base);
   std::printf("%s", rep.str().c_str());
   if (!base.empty()) {
     std::ofstream(base + ".md") << rep.str();
@@ -1215,7 +1404,16 @@ void RegisterTargets(CLI::App& app) {
   cmd->add_option("--report", a->report, "Report folder: PATCH.md, PATCH-light.svg, PATCH-slow.svg, PATCH-slow-sorted.svg");
   cmd->add_option("--target", a->target,
                   "light, slow, both (light and slow), firm (presses of the scene's press_factor x the threshold at the "
-                  "centres of the map grid's cells: the guarantee between the map's points) or all")
+                  "centres of the map grid's cells: the guarantee between the map's points), pair (hard presses at every "
+                  "grid point, each with a light touch held elsewhere on the patch) or all")
+      ->capture_default_str();
+  cmd->add_option("--pair-forces-n", a->pair_forces_n, "Pair: the hard presses' forces, N")
+      ->check(CLI::Range(0.01, 1000.0))->capture_default_str();
+  cmd->add_option("--pair-light-n", a->pair_light_n, "Pair: the light touch's force range, N (uniform)")
+      ->check(CLI::Range(0.0, 100.0))->capture_default_str();
+  cmd->add_option("--pair-presses", a->pair_presses, "Pair: presses per force per point")
+      ->check(CLI::Range(1u, 100u))->capture_default_str();
+  cmd->add_option("--pair-at", a->pair_at, "Pair: the hard presses at the map's grid points, its cells' centres or both")
       ->capture_default_str();
   cmd->add_option("--reliability", a->reliability, "Firm presses: the share of a cell centre's presses that must stop")
       ->check(CLI::Range(0.5, 1.0))->capture_default_str();
@@ -1237,7 +1435,7 @@ void RegisterTargets(CLI::App& app) {
   cmd->add_option("--slow-top-n", a->slow_top_n, "Slow press's top force, N")->check(CLI::Range(0.1, 1000.0))->capture_default_str();
   cmd->add_option("--band", a->band, "Slow press: the first STOP's true force within +- this share of the threshold")
       ->check(CLI::Range(0.01, 1.0))->capture_default_str();
-  cmd->add_option("--seed", a->seed, "Light presses' seed (slow: seed + 1, firm: seed + 2); keep it away from the training, calibration "
+  cmd->add_option("--seed", a->seed, "Light presses' seed (slow: seed + 1, firm: seed + 2, pair: seed + 3 and + 4); keep it away from the training, calibration "
                                      "and test seeds")->capture_default_str();
   cmd->add_option("--threads", a->threads, "Worker threads")->check(CLI::Range(1u, 64u))->capture_default_str();
   cmd->add_option_function<double>("--sd-k", [a](double k) { a->sd_k = k; a->sd_k_set = true; },
