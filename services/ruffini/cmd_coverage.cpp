@@ -490,15 +490,15 @@ void RegisterSensitivity(CLI::App& app) {
   cmd->add_option("--out", a->out, "Write the model with the map here (a map of the same level is replaced)");
   cmd->add_option("--report", a->report, "Report folder: PATCH.md, PATCH-force.svg, PATCH-error.svg");
   cmd->add_option("--level-n", a->level_n, "The level a press must be reported above (the region threshold), N")
-      ->check(CLI::Range(0.01, 1000.0))->capture_default_str();
+      ->check(CLI::Range(0.01, 1000.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--reliability", a->reliability, "Share of presses that must be reported above the level")
-      ->check(CLI::Range(0.5, 1.0))->capture_default_str();
+      ->check(CLI::Range(0.5, 1.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--presses", a->presses, "Presses per point and force")->check(CLI::Range(1u, 1000u))->capture_default_str();
-  cmd->add_option("--step-mm", a->step_mm, "Grid step in Y and in arc, mm")->check(CLI::Range(1.0, 50.0))->capture_default_str();
-  cmd->add_option("--edge-mm", a->edge_mm, "Grid points this far from each edge, mm")->check(CLI::Range(0.5, 20.0))->capture_default_str();
+  cmd->add_option("--step-mm", a->step_mm, "Grid step in Y and in arc, mm")->check(CLI::Range(1.0, 50.0))->check(FiniteNumber())->capture_default_str();
+  cmd->add_option("--edge-mm", a->edge_mm, "Grid points this far from each edge, mm")->check(CLI::Range(0.5, 20.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--jitter-mm", a->jitter_mm, "Each press lands within +- this of its point (Y and arc), mm")
-      ->check(CLI::Range(0.0, 5.0))->capture_default_str();
-  cmd->add_option("--forces", a->forces, "The force ladder, N (ascending)")->capture_default_str();
+      ->check(CLI::Range(0.0, 5.0))->check(FiniteNumber())->capture_default_str();
+  cmd->add_option("--forces", a->forces, "The force ladder, N (ascending)")->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--seed", a->seed, "First seed (keep it away from the training, calibration and test seeds)")->capture_default_str();
   cmd->add_option("--threads", a->threads, "Worker threads")->check(CLI::Range(1u, 64u))->capture_default_str();
   cmd->callback([a, cmd] { RunSensitivity(*a, CommandLine("sensitivity", *cmd)); });
@@ -514,11 +514,11 @@ struct TargetsArgs {
   double slow_step_mm = 10.0, slow_rate_n_per_s = 0.15, slow_top_n = 3.0, band = 0.15;
   double reliability = 0.95;  // firm presses: as the sensitivity map's
   unsigned presses = 20, threads = 1;
-  std::uint64_t seed = 1100;  // light presses; slow seed + 1, firm seed + 2, pair seed + 3 (grid points) and + 4 (cell centres)
+  std::uint64_t seed = 1100;  // light presses; slow seed + 1, firm seed + 2, pair seed + 3 (grid points), + 4 (cell centres), + 5 (border)
   std::vector<double> pair_forces_n{5.0, 20.0, 50.0, 200.0};
   std::array<double, 2> pair_light_n{0.5, 1.2};
   unsigned pair_presses = 3;
-  std::string pair_at = "both";  // grid, centres or both
+  std::string pair_at = "all";  // grid, centres, border or all
   double sd_k = 0.0;  // with sd_k_set: overrides the scene's safety.stop_rule.sd_k
   bool sd_k_set = false;
 };
@@ -1030,13 +1030,15 @@ std::string RunFirm(const PatchUnderTest& put, const StopRule& rule, const Bands
 // pair_presses times, each time while a light touch (pair_light_n, uniform) is held at a random point of the
 // patch at least kPairApartMm away: the light touch comes on 0.3 s before the hard press (ramp 0.05 s), the
 // hard press ramps over 0.3 s, holds 0.5 s and releases over 0.3 s, then the light touch is lifted. A hard
-// press stops when a message from its start to the end of its release would stop the aggregator; a stop
-// before it (the light touch alone) is counted apart and does not count for it.
+// press stops when a message from its start to the end of its release would stop the aggregator. A press
+// whose light touch alone would stop the aggregator before the hard press comes is not judged (its light
+// touch's own stops would be counted for the hard press): it is counted apart, as a false stop.
 constexpr double kPairApartMm = 30.0;
 
 struct PairPoint {
-  std::vector<unsigned> stopped;    // per force: hard presses with a stop from their start
-  std::vector<float> max_force_n;   // per force: the largest contact force sent while the hard press was on
+  std::vector<unsigned> judged;     // per force: hard presses whose light touch alone did not stop before them
+  std::vector<unsigned> stopped;    // per force: of those, hard presses with a stop from their start
+  std::vector<float> max_force_n;   // per force: the largest contact force sent while a judged hard press was on
   unsigned light_stops = 0;         // presses whose light touch alone stopped before the hard press came
   StopCause start = StopCause::kNone;
 };
@@ -1048,6 +1050,7 @@ PairPoint MeasurePair(const PatchUnderTest& put, const StopRule& rule, const Tar
   std::uniform_real_distribution<double> uy(0.0, put.spec().extent_y_mm), ur(0.0, put.spec().extent_r_deg),
       lf(a.pair_light_n[0], a.pair_light_n[1]);
   PairPoint out;
+  out.judged.assign(a.pair_forces_n.size(), 0);
   out.stopped.assign(a.pair_forces_n.size(), 0);
   out.max_force_n.assign(a.pair_forces_n.size(), 0.0f);
   out.start = UntouchedStart(s, a.rate_hz);
@@ -1064,6 +1067,7 @@ PairPoint MeasurePair(const PatchUnderTest& put, const StopRule& rule, const Tar
       for (int k = 0; k < static_cast<int>(rest * a.rate_hz); ++k) s.Frame(nullptr);
       s.TakeForces();
       StopCause before = StopCause::kNone, during = StopCause::kNone;
+      float max_during = 0.0f;
       const double t_hard = lead, t_end = lead + ramp + hold + release;
       const int n = static_cast<int>((t_end + lift + tail) * a.rate_hz);
       for (int k = 0; k < n; ++k) {
@@ -1083,103 +1087,152 @@ PairPoint MeasurePair(const PatchUnderTest& put, const StopRule& rule, const Tar
         } else if (t <= t_end && during == StopCause::kNone) {
           during = c;
         }
-        if (k + 1 == static_cast<int>(t_end * a.rate_hz)) out.max_force_n[f] = std::max(out.max_force_n[f], s.TakeForces().max_n);
+        if (k + 1 == static_cast<int>(t_end * a.rate_hz)) max_during = s.TakeForces().max_n;
       }
-      out.light_stops += before != StopCause::kNone ? 1 : 0;
+      if (before != StopCause::kNone) {
+        ++out.light_stops;
+        continue;
+      }
+      ++out.judged[f];
       out.stopped[f] += during != StopCause::kNone ? 1 : 0;
+      out.max_force_n[f] = std::max(out.max_force_n[f], max_during);
     }
   }
   return out;
 }
 
-// One grid of hard points: the map's grid points (centres false) or its cells' centres (seed + 1).
+// The covered surface's border: the points of a 1 mm lattice (Y and arc, 0.5 mm from each edge) that are covered
+// while a neighbour 1 mm away is not (held by a band, or off the patch), every 5th along the lattice. The grid
+// points and cell centres stop 2.5 mm short of a band that ends on a grid line; this is the strip between.
+std::vector<std::array<double, 2>> CoveredBorder(const PatchUnderTest& put, const Bands& bands) {
+  const double ly = put.spec().extent_y_mm, la = put.spec().extent_r_deg * put.mm_per_deg();
+  const auto ny = static_cast<int>(std::floor(ly - 1.0)) + 1, na = static_cast<int>(std::floor(la - 1.0)) + 1;
+  const auto covered = [&](int iy, int ia) {
+    if (iy < 0 || ia < 0 || iy >= ny || ia >= na) return false;
+    return bands.Holding(0.5 + iy, (0.5 + ia) / put.mm_per_deg()) == nullptr;
+  };
+  std::vector<std::array<double, 2>> out;
+  for (int iy = 0; iy < ny; ++iy) {
+    for (int ia = 0; ia < na; ++ia) {
+      if (!covered(iy, ia) || (iy + ia) % 5 != 0) continue;
+      if (covered(iy - 1, ia) && covered(iy + 1, ia) && covered(iy, ia - 1) && covered(iy, ia + 1)) continue;
+      out.push_back({0.5 + iy, (0.5 + ia) / put.mm_per_deg()});
+    }
+  }
+  return out;
+}
+
+enum class PairAt { kGrid, kCentres, kBorder };
+
+// One set of hard points: the map's grid points (seed + 3), its cells' centres (seed + 4) or the covered surface's
+// border (seed + 5).
 std::string RunPairOn(const PatchUnderTest& put, const StopRule& rule, const Bands& bands, const TargetsArgs& a,
-                      bool centres, const std::string& base) {
+                      PairAt at, const std::string& base) {
   const Grid corners = MakeGrid(put, a.step_mm, a.edge_mm);
   Grid g = corners;
+  const bool centres = at == PairAt::kCentres;
   if (centres) {
     g = Grid{};
     for (std::size_t i = 0; i + 1 < corners.ys.size(); ++i) g.ys.push_back(0.5 * (corners.ys[i] + corners.ys[i + 1]));
     for (std::size_t i = 0; i + 1 < corners.rs.size(); ++i) g.rs.push_back(0.5 * (corners.rs[i] + corners.rs[i + 1]));
   }
-  const std::string where = centres ? "the centres of the " + std::to_string(g.size()) + " cells of the map's grid (" +
-                                          GridText(corners, a.step_mm, a.edge_mm) + ")"
-                                    : GridText(g, a.step_mm, a.edge_mm);
-  const std::size_t n = g.size(), nf = a.pair_forces_n.size();
-  const std::uint64_t seed = a.seed + (centres ? 4 : 3);
+  std::vector<std::array<double, 2>> pts;
+  if (at == PairAt::kBorder) {
+    pts = CoveredBorder(put, bands);
+  } else {
+    for (std::size_t k = 0; k < g.size(); ++k) pts.push_back({g.y(k), g.r(k)});
+  }
+  std::string where;
+  if (at == PairAt::kGrid) where = GridText(g, a.step_mm, a.edge_mm);
+  if (centres) where = "the centres of the " + std::to_string(g.size()) + " cells of the map's grid (" + GridText(corners, a.step_mm, a.edge_mm) + ")";
+  if (at == PairAt::kBorder) {
+    where = std::to_string(pts.size()) + " points on the border of the covered surface (of a 1 mm lattice in Y and arc, "
+            "0.5 mm from each edge, the covered points next to a band or an edge, every 5th)";
+  }
+  const std::size_t n = pts.size(), nf = a.pair_forces_n.size();
+  const std::uint64_t seed = a.seed + (at == PairAt::kGrid ? 3 : centres ? 4 : 5);
   spdlog::info("hard presses with a light touch on {}: {} points x {} forces x {} presses, light touch {}-{} N, seeds "
                "DeriveSeed({}, point)", put.name(), n, nf, a.pair_presses, a.pair_light_n[0], a.pair_light_n[1], seed);
   std::vector<PairPoint> res(n);
   ParallelFor(n, a.threads, "hard + light " + put.name(), [&](std::size_t k) {
-    res[k] = MeasurePair(put, rule, a, g.y(k), g.r(k), twin::DeriveSeed(seed, k));
+    res[k] = MeasurePair(put, rule, a, pts[k][0], pts[k][1], twin::DeriveSeed(seed, k));
   });
   std::ostringstream rep;
-  rep << "## Hard presses with a light second touch, at " << (centres ? "the map's cell centres" : "the map's grid points") << "\n\n"
+  rep << "## Hard presses with a light second touch, at "
+      << (at == PairAt::kGrid ? "the map's grid points" : centres ? "the map's cell centres" : "the covered surface's border") << "\n\n"
       << "At each of " << where << ", " << a.pair_presses << " presses of each of";
   for (double f : a.pair_forces_n) rep << " " << Fmt(f, "%g");
   rep << " N, each while a light touch of " << Fmt(a.pair_light_n[0], "%g") << "-" << Fmt(a.pair_light_n[1], "%g")
       << " N (uniform) is held at a random point of the patch at least " << Fmt(kPairApartMm, "%g")
       << " mm away (it comes on 0.3 s before; the hard press ramps 0.3 s, holds 0.5 s, releases 0.3 s; one stream per "
          "point after a 1.2 s untouched start; seeds DeriveSeed(" << seed << ", point), held out). A hard press stops "
-         "when a message from its start to the end of its release would stop the aggregator; a stop caused by the "
-         "light touch alone, before it, does not count for it.\n\n"
-      << "| force, N | covered points where every press stopped (target: all) | presses on the covered surface without a "
-         "stop | all points where every press stopped |\n| --- | --- | --- | --- |\n";
+         "when a message from its start to the end of its release would stop the aggregator. A press whose light "
+         "touch alone stopped before the hard press came is not judged (the light touch's own stops would count for "
+         "it): those are counted apart, as false stops. A point passes a force when every judged press stopped and "
+         "at least one was judged.\n\n"
+      << "| force, N | covered points that pass (target: all) | judged presses on the covered surface without a stop "
+         "| covered points with no press judged | all points that pass |\n| --- | --- | --- | --- | --- |\n";
+  const auto passes = [&](std::size_t k, std::size_t f) { return res[k].judged[f] > 0 && res[k].stopped[f] == res[k].judged[f]; };
   std::vector<std::size_t> failing;
   std::size_t covered = 0;
-  for (std::size_t k = 0; k < n; ++k) covered += bands.Holding(g.y(k), g.r(k)) == nullptr ? 1 : 0;
+  for (std::size_t k = 0; k < n; ++k) covered += bands.Holding(pts[k][0], pts[k][1]) == nullptr ? 1 : 0;
   for (std::size_t f = 0; f < nf; ++f) {
-    std::size_t covered_ok = 0, covered_missed = 0, all_ok = 0;
+    std::size_t covered_ok = 0, covered_missed = 0, covered_judged = 0, covered_unjudged = 0, all_ok = 0;
     for (std::size_t k = 0; k < n; ++k) {
-      const bool ok = res[k].stopped[f] == a.pair_presses;
-      all_ok += ok ? 1 : 0;
-      if (bands.Holding(g.y(k), g.r(k)) != nullptr) continue;
-      covered_ok += ok ? 1 : 0;
-      covered_missed += a.pair_presses - res[k].stopped[f];
+      all_ok += passes(k, f) ? 1 : 0;
+      if (bands.Holding(pts[k][0], pts[k][1]) != nullptr) continue;
+      covered_ok += passes(k, f) ? 1 : 0;
+      covered_unjudged += res[k].judged[f] == 0 ? 1 : 0;
+      covered_judged += res[k].judged[f];
+      covered_missed += res[k].judged[f] - res[k].stopped[f];
     }
     rep << "| " << Fmt(a.pair_forces_n[f], "%g") << " | " << covered_ok << " of " << covered << " (" << Pct(covered_ok, covered)
-        << ") | " << covered_missed << " of " << covered * a.pair_presses << " | " << all_ok << " of " << n << " ("
-        << Pct(all_ok, n) << ") |\n";
+        << ") | " << covered_missed << " of " << covered_judged << " | " << covered_unjudged << " | " << all_ok << " of "
+        << n << " (" << Pct(all_ok, n) << ") |\n";
   }
   std::size_t light_stops = 0, start = 0;
   for (std::size_t k = 0; k < n; ++k) {
     light_stops += res[k].light_stops;
     start += res[k].start != StopCause::kNone ? 1 : 0;
-    if (bands.Holding(g.y(k), g.r(k)) != nullptr) continue;
+    if (bands.Holding(pts[k][0], pts[k][1]) != nullptr) continue;
     for (std::size_t f = 0; f < nf; ++f) {
-      if (res[k].stopped[f] < a.pair_presses) {
+      if (res[k].stopped[f] < res[k].judged[f]) {
         failing.push_back(k);
         break;
       }
     }
   }
-  rep << "\nThe light touch alone stopped before the hard press in " << light_stops << " of " << n * nf * a.pair_presses
-      << " presses (" << Pct(light_stops, n * nf * a.pair_presses) << "); " << start
+  rep << "\nThe light touch alone stopped before the hard press (not judged) in " << light_stops << " of "
+      << n * nf * a.pair_presses << " presses (" << Pct(light_stops, n * nf * a.pair_presses) << "); " << start
       << " streams stopped in their untouched start.\n\n";
   if (!failing.empty()) {
-    rep << "Covered points where a hard press did not stop (" << failing.size() << "):\n\n| Y mm | R deg |";
-    for (double f : a.pair_forces_n) rep << " " << Fmt(f, "%g") << " N: stopped, largest force sent |";
+    rep << "Covered points where a judged hard press did not stop (" << failing.size() << "):\n\n| Y mm | R deg |";
+    for (double f : a.pair_forces_n) rep << " " << Fmt(f, "%g") << " N: stopped of judged, largest force sent |";
     rep << "\n| --- | --- |";
     for (std::size_t f = 0; f < nf; ++f) rep << " --- |";
     rep << "\n";
     for (std::size_t k : failing) {
-      rep << "| " << Fmt(g.y(k), "%.1f") << " | " << Fmt(g.r(k), "%.1f") << " |";
+      rep << "| " << Fmt(pts[k][0], "%.1f") << " | " << Fmt(pts[k][1], "%.1f") << " |";
       for (std::size_t f = 0; f < nf; ++f) {
-        rep << " " << res[k].stopped[f] << " of " << a.pair_presses << ", " << Fmt(res[k].max_force_n[f]) << " N |";
+        rep << " " << res[k].stopped[f] << " of " << res[k].judged[f] << ", " << Fmt(res[k].max_force_n[f]) << " N |";
       }
       rep << "\n";
     }
     rep << "\n";
   }
-  if (!base.empty()) {
+  if (!base.empty() && at != PairAt::kBorder) {
     std::vector<double> share(n);
     for (std::size_t k = 0; k < n; ++k) {
-      unsigned least = a.pair_presses;
-      for (std::size_t f = 0; f < nf; ++f) least = std::min(least, res[k].stopped[f]);
-      share[k] = static_cast<double>(least) / a.pair_presses;
+      double least = 1.0;  // NaN (grey) where a force had no judged press
+      for (std::size_t f = 0; f < nf; ++f) {
+        least = res[k].judged[f] == 0 ? std::numeric_limits<double>::quiet_NaN()
+                                      : std::min(least, static_cast<double>(res[k].stopped[f]) / res[k].judged[f]);
+        if (std::isnan(least)) break;
+      }
+      share[k] = least;
     }
     const std::string file = put.name() + (centres ? "-pair-centres.svg" : "-pair.svg");
-    SaveGridHeat(g.ys, g.rs, share, put, 0.0, 1.0, "share of hard presses that STOP, the weakest force's (1: all)",
+    SaveGridHeat(g.ys, g.rs, share, put, 0.0, 1.0, "share of judged hard presses that STOP, the weakest force's (1: all; grey: none judged)",
                  put.name() + ": hard presses with a light second touch that STOP" + (centres ? " (cell centres)" : ""),
                  a.report + "/" + file);
     rep << "Figure: `" << file << "` (at each point, the share of presses that stop at its weakest force).\n\n";
@@ -1190,8 +1243,9 @@ std::string RunPairOn(const PatchUnderTest& put, const StopRule& rule, const Ban
 std::string RunPair(const PatchUnderTest& put, const StopRule& rule, const Bands& bands, const TargetsArgs& a,
                     const std::string& base) {
   std::string rep;
-  if (a.pair_at != "centres") rep += RunPairOn(put, rule, bands, a, false, base);
-  if (a.pair_at != "grid") rep += RunPairOn(put, rule, bands, a, true, base);
+  if (a.pair_at == "grid" || a.pair_at == "all") rep += RunPairOn(put, rule, bands, a, PairAt::kGrid, base);
+  if (a.pair_at == "centres" || a.pair_at == "all") rep += RunPairOn(put, rule, bands, a, PairAt::kCentres, base);
+  if (a.pair_at == "border" || a.pair_at == "all") rep += RunPairOn(put, rule, bands, a, PairAt::kBorder, base);
   return rep;
 }
 
@@ -1326,11 +1380,16 @@ void RunTargets(const TargetsArgs& a, const std::string& command) {
       a.target != "all") {
     throw InputError("--target must be light, slow, both (light and slow), firm, pair or all (got '" + a.target + "')");
   }
-  if (a.pair_at != "grid" && a.pair_at != "centres" && a.pair_at != "both") {
-    throw InputError("--pair-at must be grid, centres or both (got '" + a.pair_at + "')");
+  if (a.pair_at != "grid" && a.pair_at != "centres" && a.pair_at != "border" && a.pair_at != "all") {
+    throw InputError("--pair-at must be grid, centres, border or all (got '" + a.pair_at + "')");
   }
-  if (!(a.pair_light_n[0] >= 0 && a.pair_light_n[1] >= a.pair_light_n[0])) {
-    throw InputError("--pair-light-n: the light touch's range must be two forces, the first not above the second");
+  // CLI11's Range lets NaN through (every comparison with it is false): each force is checked here.
+  if (!(std::isfinite(a.pair_light_n[0]) && std::isfinite(a.pair_light_n[1]) && a.pair_light_n[0] >= 0 &&
+        a.pair_light_n[1] >= a.pair_light_n[0])) {
+    throw InputError("--pair-light-n: the light touch's range must be two finite forces >= 0, the first not above the second");
+  }
+  for (double f : a.pair_forces_n) {
+    if (!(std::isfinite(f) && f > 0)) throw InputError("--pair-forces-n: every hard force must be finite and above 0 N (got " + Fmt(f, "%g") + ")");
   }
   const PatchUnderTest put(a.scene, a.patch, a.model);
   // The scene's safety section (thresholds, input limits, accepted bands); a scene without one needs
@@ -1408,40 +1467,41 @@ void RegisterTargets(CLI::App& app) {
                   "grid point, each with a light touch held elsewhere on the patch) or all")
       ->capture_default_str();
   cmd->add_option("--pair-forces-n", a->pair_forces_n, "Pair: the hard presses' forces, N")
-      ->check(CLI::Range(0.01, 1000.0))->capture_default_str();
+      ->check(CLI::Range(0.01, 1000.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--pair-light-n", a->pair_light_n, "Pair: the light touch's force range, N (uniform)")
-      ->check(CLI::Range(0.0, 100.0))->capture_default_str();
+      ->check(CLI::Range(0.0, 100.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--pair-presses", a->pair_presses, "Pair: presses per force per point")
       ->check(CLI::Range(1u, 100u))->capture_default_str();
-  cmd->add_option("--pair-at", a->pair_at, "Pair: the hard presses at the map's grid points, its cells' centres or both")
+  cmd->add_option("--pair-at", a->pair_at, "Pair: the hard presses at the map's grid points, its cells' centres, the covered surface's border (1 mm "
+                  "inside the accepted bands and the edges) or all")
       ->capture_default_str();
   cmd->add_option("--reliability", a->reliability, "Firm presses: the share of a cell centre's presses that must stop")
-      ->check(CLI::Range(0.5, 1.0))->capture_default_str();
+      ->check(CLI::Range(0.5, 1.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--level-n", a->level_n, "The threshold, N (default: the patch's region threshold in the scene)")
-      ->check(CLI::Range(0.01, 1000.0));
+      ->check(CLI::Range(0.01, 1000.0))->check(FiniteNumber());
   cmd->add_option("--force-n", a->force_n, "Light presses' force, N (default: --light-factor x the threshold)")
-      ->check(CLI::Range(0.0, 1000.0));
+      ->check(CLI::Range(0.0, 1000.0))->check(FiniteNumber());
   cmd->add_option("--light-factor", a->light_factor, "Light presses' force as a multiple of the threshold")
-      ->check(CLI::Range(0.0, 10.0))->capture_default_str();
+      ->check(CLI::Range(0.0, 10.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--presses", a->presses, "Light presses per point")->check(CLI::Range(1u, 1000u))->capture_default_str();
-  cmd->add_option("--hold-s", a->hold_s, "Light presses' hold, s")->check(CLI::Range(0.01, 10.0))->capture_default_str();
-  cmd->add_option("--step-mm", a->step_mm, "Light presses' grid step in Y and in arc, mm")->check(CLI::Range(1.0, 50.0))->capture_default_str();
+  cmd->add_option("--hold-s", a->hold_s, "Light presses' hold, s")->check(CLI::Range(0.01, 10.0))->check(FiniteNumber())->capture_default_str();
+  cmd->add_option("--step-mm", a->step_mm, "Light presses' grid step in Y and in arc, mm")->check(CLI::Range(1.0, 50.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--slow-step-mm", a->slow_step_mm, "Slow presses' grid step in Y and in arc, mm")
-      ->check(CLI::Range(1.0, 50.0))->capture_default_str();
-  cmd->add_option("--edge-mm", a->edge_mm, "Grid points this far from each edge, mm")->check(CLI::Range(0.5, 40.0))->capture_default_str();
+      ->check(CLI::Range(1.0, 50.0))->check(FiniteNumber())->capture_default_str();
+  cmd->add_option("--edge-mm", a->edge_mm, "Grid points this far from each edge, mm")->check(CLI::Range(0.5, 40.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--jitter-mm", a->jitter_mm, "Each light press lands within +- this of its point (Y and arc), mm")
-      ->check(CLI::Range(0.0, 5.0))->capture_default_str();
-  cmd->add_option("--slow-rate", a->slow_rate_n_per_s, "Slow press's rate, N/s")->check(CLI::Range(0.01, 100.0))->capture_default_str();
-  cmd->add_option("--slow-top-n", a->slow_top_n, "Slow press's top force, N")->check(CLI::Range(0.1, 1000.0))->capture_default_str();
+      ->check(CLI::Range(0.0, 5.0))->check(FiniteNumber())->capture_default_str();
+  cmd->add_option("--slow-rate", a->slow_rate_n_per_s, "Slow press's rate, N/s")->check(CLI::Range(0.01, 100.0))->check(FiniteNumber())->capture_default_str();
+  cmd->add_option("--slow-top-n", a->slow_top_n, "Slow press's top force, N")->check(CLI::Range(0.1, 1000.0))->check(FiniteNumber())->capture_default_str();
   cmd->add_option("--band", a->band, "Slow press: the first STOP's true force within +- this share of the threshold")
-      ->check(CLI::Range(0.01, 1.0))->capture_default_str();
-  cmd->add_option("--seed", a->seed, "Light presses' seed (slow: seed + 1, firm: seed + 2, pair: seed + 3 and + 4); keep it away from the training, calibration "
+      ->check(CLI::Range(0.01, 1.0))->check(FiniteNumber())->capture_default_str();
+  cmd->add_option("--seed", a->seed, "Light presses' seed (slow: seed + 1, firm: seed + 2, pair: seed + 3, 4 and 5); keep it away from the training, calibration "
                                      "and test seeds")->capture_default_str();
   cmd->add_option("--threads", a->threads, "Worker threads")->check(CLI::Range(1u, 64u))->capture_default_str();
   cmd->add_option_function<double>("--sd-k", [a](double k) { a->sd_k = k; a->sd_k_set = true; },
                                    "The stop rule's sd_k (default: the scene's safety.stop_rule): stop when force + sd_k x sd "
                                    "is above the threshold")
-      ->check(CLI::Range(-3.0, 3.0));
+      ->check(CLI::Range(-3.0, 3.0))->check(FiniteNumber());
   cmd->callback([a, cmd] { RunTargets(*a, CommandLine("coverage-targets", *cmd)); });
 }
 

@@ -1,6 +1,8 @@
 #pragma once
 // Subcommands of the `ruffini` tool. Each Register* adds its subcommand to the app; the callback runs it.
 #include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdlib>
 #include <optional>
 #include <string>
 
@@ -17,6 +19,18 @@ void RegisterSoakCommand(CLI::App& app);
 void RegisterCoverageCommands(CLI::App& app);
 void RegisterFieldHoursCommand(CLI::App& app);  // field-hours
 void RegisterProbeCommand(CLI::App& app);      // grating-probe  // sensitivity, check-scene
+
+// CLI::Range passes "nan" (every comparison with NaN is false): add this to a number option's checks to refuse
+// NaN and infinities by name. It checks each value of a vector option.
+inline CLI::Validator FiniteNumber() {
+  return CLI::Validator(
+      [](std::string& v) {
+        char* end = nullptr;
+        const double x = std::strtod(v.c_str(), &end);
+        return end != v.c_str() && !std::isfinite(x) ? std::string("must be a finite number (got ") + v + ")" : std::string();
+      },
+      "FINITE");
+}
 
 // A model switch a command may override: "model" (unset: as the model file says), "on" or "off".
 inline std::optional<bool> ModelOnOff(const std::string& v) {

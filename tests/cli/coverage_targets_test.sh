@@ -5,8 +5,8 @@
 #   always stop: no point clean, every press stops, the causes add up to the presses; every slow press to 3 N
 #   there stops during its ramp, and the report's counts add up to the points;
 # - the report and its figures are written (each figure's title names the patch);
-# - pairs (a hard press with a light touch held elsewhere): 50 and 200 N in the interior always stop, 0.01 N
-#   with a light touch of 0 N never does, and the covered counts add up;
+# - pairs (a hard press with a light touch held elsewhere): 50 and 200 N in the interior stop whenever judged,
+#   0.01 N with a light touch of 0 N never does, and the covered counts add up;
 # - bad input (a scene without thresholds and no --level-n, a slow press that cannot leave the band, a bad
 #   pair option) is refused.
 # Usage: coverage_targets_test.sh RUFFINI SCENE WORK
@@ -58,34 +58,47 @@ w=$(awk '{print $1}' <<<"$within")
 grep -Eq '\| true force at the first STOP, p5 / p50 / p95 \(the '"$slow_pts"' points stopped in the ramp\) \| [0-9.]+ / [0-9.]+ / [0-9.]+ N' "$work/hard.md"
 check "slow: the distribution over every point" $?
 
-# Pairs: a hard press with a light touch elsewhere. In the interior 50 and 200 N stop every time; 0.01 N with a
-# light touch of 0 N never. "| FORCE | covered ok of covered (..) | missed of presses | all ok of n (..) |"
-"$ruffini" coverage-targets --scene "$scene" --patch upper_arm_a --target pair --pair-at both --edge-mm 30 --step-mm 30 \
+# Pairs: a hard press with a light touch elsewhere. In the interior 50 and 200 N stop every time they are judged
+# (a press whose light touch alone stopped first is not); 0.01 N with a light touch of 0 N never stops, and every
+# press is judged. Row: "| FORCE | pass of covered (..) | missed of judged | covered unjudged | pass of all (..) |"
+"$ruffini" coverage-targets --scene "$scene" --patch upper_arm_a --target pair --pair-at all --edge-mm 30 --step-mm 30 \
   --pair-forces-n 50 200 --pair-presses 1 --threads 2 --report "$work/pair" >"$work/pair.md" 2>"$work/pair.err" \
   || { echo "FAIL: pair run"; cat "$work/pair.err"; exit 1; }
 for f in 50 200; do
   for sec in 1 2; do  # the grid points, then the cell centres
     r=$(grep "^| $f | " "$work/pair.md" | sed -n ${sec}p)
     echo "pair $f N (section $sec): $r"
-    ok=$(awk -F'|' '{split($3, a, " "); split($4, b, " "); split($5, c, " "); print (a[1] == a[3] && a[3] > 0 && b[1] == 0 && c[1] == c[3]) ? 0 : 1}' <<<"$r")
-    [ "$ok" = "0" ]; check "pair $f N interior (section $sec): every press stops" $?
+    ok=$(awk -F'|' '{split($3, a, " "); split($4, b, " "); u = $5 + 0; print (a[3] > 0 && a[1] + u == a[3] && b[1] == 0 && b[3] == a[3] - u && b[3] > 0) ? 0 : 1}' <<<"$r")
+    [ "$ok" = "0" ]; check "pair $f N interior (section $sec): every judged press stops" $?
   done
 done
+# The border section (the third): points 0.5 mm inside the bands, every one covered; its counts add up.
+for f in 50 200; do
+  r=$(grep "^| $f | " "$work/pair.md" | sed -n 3p)
+  echo "pair $f N (border): $r"
+  ok=$(awk -F'|' '{split($3, a, " "); split($4, b, " "); split($6, d, " "); u = $5 + 0; print (a[3] > 20 && a[3] == d[3] && b[3] == a[3] - u && a[1] <= a[3] - u) ? 0 : 1}' <<<"$r")
+  [ "$ok" = "0" ]; check "pair $f N border: every point covered, the counts add up" $?
+done
+grep -q "points on the border of the covered surface" "$work/pair.md"; check "pair: the border section is there" $?
 "$ruffini" coverage-targets --scene "$scene" --patch upper_arm_a --target pair --pair-at grid --edge-mm 30 --step-mm 30 \
   --pair-forces-n 0.01 --pair-light-n 0 0 --pair-presses 2 --threads 2 >"$work/pair0.md" 2>"$work/pair0.err" \
   || { echo "FAIL: zero pair run"; cat "$work/pair0.err"; exit 1; }
 r=$(grep "^| 0.01 | " "$work/pair0.md")
 echo "pair 0.01 N: $r"
-ok=$(awk -F'|' '{split($3, a, " "); split($4, b, " "); print (a[1] == 0 && a[3] > 0 && b[1] == b[3] && b[3] == 2 * a[3]) ? 0 : 1}' <<<"$r")
-[ "$ok" = "0" ]; check "pair 0.01 N: no press stops, every covered press counted" $?
-grep -q "The light touch alone stopped before the hard press in 0 of" "$work/pair0.md"; check "pair: a 0 N light touch never stops" $?
+ok=$(awk -F'|' '{split($3, a, " "); split($4, b, " "); print (a[1] == 0 && a[3] > 0 && b[1] == b[3] && b[3] == 2 * a[3] && $5 + 0 == 0) ? 0 : 1}' <<<"$r")
+[ "$ok" = "0" ]; check "pair 0.01 N: no press stops, every covered press judged" $?
+grep -q "The light touch alone stopped before the hard press (not judged) in 0 of" "$work/pair0.md"; check "pair: a 0 N light touch never stops" $?
 for f in upper_arm_a-pair.svg upper_arm_a-pair-centres.svg; do
   grep -q '^<svg ' "$work/pair/$f"; check "report: $f is an SVG" $?
 done
 
 # Bad input: a clear error, no report.
 out=$("$ruffini" coverage-targets --scene "$scene" --target pair --pair-at edges 2>&1); rc=$?
-[ $rc -ne 0 ] && grep -q "pair-at must be grid, centres or both (got 'edges')" <<<"$out"; check "a bad --pair-at is refused" $?
+[ $rc -ne 0 ] && grep -q "pair-at must be grid, centres, border or all (got 'edges')" <<<"$out"; check "a bad --pair-at is refused" $?
+for opts in "--pair-forces-n 5 nan" "--pair-forces-n inf" "--pair-light-n 1 nan" "--force-n nan" "--jitter-mm nan"; do
+  out=$("$ruffini" coverage-targets --scene "$scene" --target pair $opts 2>&1); rc=$?
+  [ $rc -ne 0 ] && grep -Eq "must be a finite number|not in range" <<<"$out"; check "$opts is refused (review 13: CLI11's Range passes NaN)" $?
+done
 out=$("$ruffini" coverage-targets --scene "$scene" --target pair --pair-light-n 2 1 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "pair-light-n: the light touch's range" <<<"$out"; check "a reversed light range is refused" $?
 out=$("$ruffini" coverage-targets --scene "$(dirname "$scene")/forearm.yaml" --target light 2>&1); rc=$?
