@@ -1055,6 +1055,8 @@ PairPoint MeasurePair(const PatchUnderTest& put, const StopRule& rule, const Tar
   out.max_force_n.assign(a.pair_forces_n.size(), 0.0f);
   out.start = UntouchedStart(s, a.rate_hz);
   const double rest = 0.3, lead = 0.3, ramp = 0.3, hold = 0.5, release = 0.3, lift = 0.05, tail = 0.05;
+  std::vector<twin::Contact> on;  // the frame's probes (reused: no allocation per frame)
+  on.reserve(2);
   for (std::size_t f = 0; f < a.pair_forces_n.size(); ++f) {
     for (unsigned p = 0; p < a.pair_presses; ++p) {
       double ly = 0, lr = 0;
@@ -1077,7 +1079,7 @@ PairPoint MeasurePair(const PatchUnderTest& put, const StopRule& rule, const Tar
         if (t >= t_hard && t < t_hard + ramp) wh = (t - t_hard) / ramp;
         else if (t >= t_hard + ramp && t <= t_hard + ramp + hold) wh = 1.0;
         else if (t > t_hard + ramp + hold && t < t_end) wh = 1.0 - (t - t_hard - ramp - hold) / release;
-        std::vector<twin::Contact> on;
+        on.clear();
         if (wl > 0) on.push_back(twin::Contact{{ly, lr}, wl * light_n, put.scene().probe});
         if (wh > 0) on.push_back(twin::Contact{{y_mm, r_deg}, wh * a.pair_forces_n[f], put.scene().probe});
         if (k == static_cast<int>(t_hard * a.rate_hz)) s.TakeForces();

@@ -27,7 +27,7 @@ SP=$(waitport $D/sim/ports stream)
 PATCHES=$(awk '/^patches:/{f=1;next} f&&/^  - name:/{print $3} /^[a-z]/&&!/^patches/{f=0}' $S)
 for p in $PATCHES; do decoder $p dec; done
 sleep 4
-$B/ruffini reset --aggregator 127.0.0.1:$AP --insecure --wait-s 2 --operator review10 > $D/reset1 2>&1
+$B/ruffini reset --aggregator 127.0.0.1:$AP --insecure --wait-s 2 --operator ${OPERATOR:-review10} > $D/reset1 2>&1
 t0=$(grep -o "sample 0 is at Unix time [0-9]*" $D/sim/err | awk '{print $NF}')
 if [ -n "$RESTART" ]; then
   set -- $RESTART; tk=$1; ts=$2; shift 2; rp="$*"
@@ -37,7 +37,7 @@ fi
 if [ -n "$RESETS" ]; then
   ( for r in $RESETS; do sleep $(at $t0 $r)
       echo "== reset at t $r (wall $(python3 -c "import time; print(round(time.time_ns()/1e9 - $t0/1e9, 2))"))" >> $D/resets
-      $B/ruffini reset --aggregator 127.0.0.1:$AP --insecure --operator review10 >> $D/resets 2>&1
+      $B/ruffini reset --aggregator 127.0.0.1:$AP --insecure --operator ${OPERATOR:-review10} >> $D/resets 2>&1
     done ) & pids+=($!)
 fi
 sleep $T
