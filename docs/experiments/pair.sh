@@ -4,8 +4,8 @@
 # 5 mm grid and at every cell centre (3 presses per force), each while a light touch of 0.5-1.2 N is held at a
 # random point of the same patch at least 30 mm away (seeds DeriveSeed(1103, point) and DeriveSeed(1104, point):
 # held out), and counts the hard presses on the covered surface that do not stop. The lab scene (cobot.yaml:
-# upper_arm_a without the two-touch check, forearm_a with it) and the field scene (cobot-field.yaml, each cast
-# its own model).
+# upper_arm_a's cobot-upper_arm.rmodel and forearm_a's file, both with the two-touch check since stop 33) and the
+# field scene (cobot-field.yaml, each cast its own model; its upper arms without the check).
 # Run from the repository root after `cmake --workflow --preset release`.
 # Usage: docs/experiments/pair.sh [BUILD_BIN_DIR] [OUT_DIR]   (about 9 min a patch on 2 idle cores)
 set -euo pipefail

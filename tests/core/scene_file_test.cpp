@@ -25,8 +25,10 @@ TEST(SceneFile, TheCobotScene) {
   for (const auto& p : s.patches) {
     EXPECT_EQ(fs::path(p.spec_path), fs::path(RUFFINI_SOURCE_DIR "/config/patches/forearm.yaml").lexically_normal());
     // The forearm patches share a seam and carry their own coverage maps (docs/coverage.md): copies of the
-    // shipped model; the upper-arm patches name the shipped model itself.
-    const std::string model = p.name.rfind("forearm_", 0) == 0 ? "cobot-" + p.name + ".rmodel" : "forearm.rmodel";
+    // shipped model; the upper-arm patches share one copy (same cast, every edge free), and every copy carries
+    // the two-touch check (stop 33).
+    const std::string model =
+        p.name.rfind("forearm_", 0) == 0 ? "cobot-" + p.name + ".rmodel" : "cobot-upper_arm.rmodel";
     EXPECT_EQ(fs::path(p.model_path), (fs::path(RUFFINI_SOURCE_DIR "/config/models") / model).lexically_normal());
     EXPECT_TRUE(p.entry.Has("mount") && p.entry.Has("region"));
   }

@@ -55,6 +55,9 @@ class HardPressRig {
   [[nodiscard]] const twin::SkinTwin& twin() const noexcept { return twin_; }
   // The decoder's pipeline settings (the service's defaults unless a test changes them).
   decode::PipelineConfig& pipeline_config() noexcept { return pipeline_config_; }
+  // A stop rule measured and not shipped (docs/experiments/pair.md, "Stop 33"): a contact flagged `multiple` also
+  // stops when force + k x force_sd crosses the threshold (0: off, the aggregator's rule).
+  void set_multiple_sd_k(double k) noexcept { multiple_sd_k_ = k; }
 
   // Several probes pressed together (same ramp, hold and release).
   PressOutcome Press(std::span<const ProbeAt> probes, double threshold_n, std::uint64_t seed = 1) const {
@@ -125,6 +128,10 @@ class HardPressRig {
         }
         out.max_force_n = std::max(out.max_force_n, m.contact.force_n);
         if (m.contact.force_n > threshold_n) out.stop_force = true;
+        if (multiple_sd_k_ > 0.0 && m.contact.multiple &&
+            m.contact.force_n + multiple_sd_k_ * m.contact.force_sd_n > threshold_n) {
+          out.stop_force = true;
+        }
 #ifdef RUFFINI_HAS_OVER_RANGE
         if (m.contact.over_range) out.over_range = true;
 #endif
@@ -138,6 +145,7 @@ class HardPressRig {
   std::size_t patch_;
   const v1::DecoderModel& model_;
   double rate_hz_;
+  double multiple_sd_k_ = 0.0;
   std::unique_ptr<sim::MountedScene> mounts_;  // the scene's seams make edges `continued` (sim::EffectsFor)
   twin::SkinTwin twin_;
   ingest::DecoderConfig codec_;

@@ -3,7 +3,7 @@
 // frame by frame over each hold (two_touch.h). Prints a markdown report.
 //
 //   two_touch_eval SCENE PATCH SEED PAIRS SINGLES AREA [model=FILE] [misfit=X] [margin=MM] [link=MM rel=X floor=PM]
-//                  [force=networks|largest|total k=X gain=PM_PER_N]
+//                  [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X]
 //
 // model: another model file than the scene's; misfit: its ResponseMap's multiple_misfit; margin:
 // PipelineConfig::multi_margin_mm; link/rel/floor: the gratings' groups (models without a ResponseMap);
@@ -85,7 +85,7 @@ int main(int argc, char** argv) {
   if (argc < 7) {
     std::fprintf(stderr,
                  "usage: %s SCENE PATCH SEED PAIRS SINGLES AREA [model=FILE] [misfit=X] [margin=MM] [link=MM rel=X floor=PM]\n"
-                 "       [force=networks|largest|total k=X gain=PM_PER_N]\n"
+                 "       [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X]\n"
                  "  AREA: whole | Y0:Y1:R0:R1\n",
                  argv[0]);
     return 2;
@@ -97,7 +97,7 @@ int main(int argc, char** argv) {
     const std::uint64_t seed = std::stoull(argv[3]);
     const int pairs = std::stoi(argv[4]), singles = std::stoi(argv[5]);
     std::string model_path = scene.patches[patch].model_path;
-    double misfit = -1;
+    double misfit = -1, multiple_k = 0;
     decode::PipelineConfig knobs;
     for (int i = 7; i < argc; ++i) {
       const std::string kv = argv[i];
@@ -119,6 +119,7 @@ int main(int argc, char** argv) {
       }
       else if (k == "k") knobs.multi_force_k = std::stod(v);
       else if (k == "gain") knobs.multi_force_min_gain = std::stod(v);
+      else if (k == "multiple_k") multiple_k = std::stod(v);  // judge a flagged contact at force + k x sd (not shipped)
       else throw std::runtime_error("unknown knob '" + k + "'");
     }
     v1::DecoderModel model = decode::LoadModel(model_path);
@@ -134,6 +135,7 @@ int main(int argc, char** argv) {
     rig.pipeline_config().multi_force = knobs.multi_force;
     rig.pipeline_config().multi_force_k = knobs.multi_force_k;
     rig.pipeline_config().multi_force_min_gain = knobs.multi_force_min_gain;
+    rig.set_multiple_sd_k(multiple_k);
     const decode::PipelineConfig& pc = rig.pipeline_config();
     const patch::PatchSpec& spec = scene.patches[patch].spec;
     const double mm_per_deg = testing::MmPerDeg(scene, patch);
@@ -236,11 +238,11 @@ int main(int argc, char** argv) {
     Row("**two touches, all**", all_pairs);
     Row("**one touch** (false flags)", single);
     std::printf("\n**The stop rule** (threshold 1.5 N; a press stops on a contact above it, an over-range contact or a "
-                "fault; `multi_force` %s, k %.2f, min gain %.2f pm/N):\n\n",
+                "fault; `multi_force` %s, k %.2f, min gain %.2f pm/N; a flagged contact judged at force + %.1f sd):\n\n",
                 pc.multi_force == decode::PipelineConfig::MultiForce::kNetworks  ? "networks"
                 : pc.multi_force == decode::PipelineConfig::MultiForce::kLargest ? "largest"
                                                                                  : "total",
-                pc.multi_force_k, pc.multi_force_min_gain);
+                pc.multi_force_k, pc.multi_force_min_gain, multiple_k);
     std::printf("| presses | should | n | stopped |\n| --- | --- | --- | --- |\n");
     const char* names[kStopKinds] = {"two touches, the larger at least 1.65 N (1.1 x)", "two touches, both at most 1.35 N (sum above)",
                                      "two touches, each 0.2-0.7 N (sum below)", "one touch, at least 1.65 N",

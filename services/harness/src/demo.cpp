@@ -209,12 +209,15 @@ class Observer {
     stub_->GetStatus(&ctx, v1::GetStatusRequest{}, &s);
     return s;
   }
-  v1::ResetStopResponse Reset(std::uint64_t epoch) {
+  // The operator's reset of the state they saw: its epoch and its run. The run comes from that state, not from a
+  // GetStatus call: a status call that timed out on a loaded host left the run id 0, and every reset was then
+  // refused as `wrong_run` (a demo run on a busy machine, stop 33).
+  v1::ResetStopResponse Reset(const v1::SafetyState& seen) {
     grpc::ClientContext ctx;
     ctx.set_deadline(std::chrono::system_clock::now() + 1s);
     v1::ResetStopRequest r;
-    r.set_stop_epoch(epoch);
-    r.set_aggregator_run_id(Status().aggregator_run_id());  // the run whose epoch this is
+    r.set_stop_epoch(seen.stop_epoch());
+    r.set_aggregator_run_id(seen.aggregator_run_id());  // the run whose epoch this is
     r.set_operator_name("ruffini demo");
     r.set_operator_note("scripted reset");
     v1::ResetStopResponse resp;
@@ -430,7 +433,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
       const auto latest = observer.Latest();
       if (!latest) return false;
       if (latest->state.state() == v1::SafetyState::STATE_CLEAR) return true;
-      const auto r = observer.Reset(latest->state.stop_epoch());
+      const auto r = observer.Reset(latest->state);
       last = r.message();
       return false;
     }, timeout, 100ms);
@@ -750,7 +753,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
         if (faults_reset.insert(latest->state.stop_epoch()).second) {
           faults_seen += (faults_seen.empty() ? "" : ", ") + latest->state.cause().message();
         }
-        observer.Reset(latest->state.stop_epoch());
+        observer.Reset(latest->state);
         last_reset = Clock::now();
       }
       return t_s() > end_s + 0.5;
