@@ -381,10 +381,17 @@ std::string DescribeCoverage(const SceneCoverage& c, bool points) {
       continue;
     }
     out << "region " << r.region() << ": threshold " << Num(r.threshold_n()) << " N, press factor "
-        << Num(r.press_factor()) << "; maps of level " << Num(r.map_level_n()) << " N; guaranteed threshold "
-        << Num(r.guaranteed_threshold_n()) << " N (every press of " << Num(r.stop_force_n()) << " N or more is "
-        << "reported above the level on the covered surface: " << r.covered_points() << " of " << r.points()
-        << " map points): "
+        << Num(r.press_factor()) << "; ";
+    if (r.points() == 0) {
+      // No map this region's patches can use (review 14: this line once read "maps of level nan N; guaranteed
+      // threshold inf N ... 0 of 0 map points").
+      out << "no usable sensitivity map, so no threshold can be guaranteed: ";
+    } else {
+      out << "maps of level " << Num(r.map_level_n()) << " N; guaranteed threshold " << Num(r.guaranteed_threshold_n())
+          << " N (every press of " << Num(r.stop_force_n()) << " N or more is reported above the level on the "
+          << "covered surface: " << r.covered_points() << " of " << r.points() << " map points): ";
+    }
+    out
         << (!g.ok() ? "NOT GUARANTEED"
                     : g.covered_points == 0 ? "NOTHING COVERED (every patch accepted as uncovered: nothing is promised)"
                                             : "GUARANTEED")

@@ -163,12 +163,14 @@ class Controller {
     if (!stub_->GetStatus(&ctx, v1::GetStatusRequest{}, &s).ok()) return std::nullopt;
     return s;
   }
-  bool Reset(std::uint64_t epoch) {
+  // The reset of the state the bench saw: its epoch and its run (not a fresh GetStatus run id, which is 0 when
+  // that call fails and would pair the epoch with another run after a restart; review 14 finding 6).
+  bool Reset(const v1::SafetyState& seen) {
     grpc::ClientContext ctx;
     ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(2));
     v1::ResetStopRequest r;
-    r.set_stop_epoch(epoch);
-    if (const auto st = Status()) r.set_aggregator_run_id(st->aggregator_run_id());  // the run whose epoch this is
+    r.set_stop_epoch(seen.stop_epoch());
+    r.set_aggregator_run_id(seen.aggregator_run_id());  // the run whose epoch this is
     r.set_operator_name("ruffini bench-aggregator");
     v1::ResetStopResponse resp;
     const bool ok = stub_->ResetStop(&ctx, r, &resp).ok() && resp.accepted();
@@ -244,7 +246,7 @@ bool ClearStartup(Controller& c, milliseconds timeout, const std::function<bool(
     const auto last = c.Last();
     if (!last) return false;
     if (last->state.state() == v1::SafetyState::STATE_CLEAR) return true;
-    c.Reset(last->state.stop_epoch());
+    c.Reset(last->state);
     return false;
   }, timeout, milliseconds(100));
 }
@@ -550,7 +552,7 @@ LatencyRun RunLatency(const AggregatorBenchOptions& o, int patches, const std::f
   while (Clock::now() < w_end) {
     if (!alive()) throw InputError("bench-aggregator: " + tag + "a process exited: " + agg->stderr_text().substr(0, 4000));
     const auto last = controller.Last();
-    if (last && last->state.state() != v1::SafetyState::STATE_CLEAR) controller.Reset(last->state.stop_epoch());
+    if (last && last->state.state() != v1::SafetyState::STATE_CLEAR) controller.Reset(last->state);
     std::this_thread::sleep_for(milliseconds(50));
     if (static_cast<std::size_t>(SecondsSince(w0) / 15.0) > reported) {
       reported = static_cast<std::size_t>(SecondsSince(w0) / 15.0);
