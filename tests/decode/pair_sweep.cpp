@@ -6,7 +6,8 @@
 // largest force reported, whether it stops at the threshold, the frames of the hold flagged `multiple`) and the
 // count of placements without a stop.
 //
-//   pair_sweep SCENE PATCH Y_MM R_DEG FORCE_N LIGHT_N [THRESHOLD_N=1.5] [SEED=1]
+//   pair_sweep SCENE PATCH Y_MM R_DEG FORCE_N LIGHT_N [THRESHOLD_N=1.5] [SEED=1] [confirm]
+// (confirm: PipelineConfig::multi_confirm_anywhere on, a flag only when no single touch anywhere explains the frame)
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -21,7 +22,7 @@
 int main(int argc, char** argv) try {
   using namespace ruffini;
   if (argc < 7) {
-    std::fprintf(stderr, "usage: pair_sweep SCENE PATCH Y_MM R_DEG FORCE_N LIGHT_N [THRESHOLD_N] [SEED]\n");
+    std::fprintf(stderr, "usage: pair_sweep SCENE PATCH Y_MM R_DEG FORCE_N LIGHT_N [THRESHOLD_N] [SEED] [confirm]\n");
     return 2;
   }
   const twin::Scene scene = twin::LoadScene(argv[1]);
@@ -35,6 +36,7 @@ int main(int argc, char** argv) try {
   }
   const v1::DecoderModel model = decode::LoadModel(scene.patches[p].model_path);
   testing::HardPressRig rig(scene, p, model);
+  if (argc > 9 && std::string(argv[9]) == "confirm") rig.pipeline_config().multi_confirm_anywhere = true;
   const double y = std::atof(argv[3]), r = std::atof(argv[4]), f = std::atof(argv[5]), fl = std::atof(argv[6]);
   const double threshold = argc > 7 ? std::atof(argv[7]) : 1.5;
   const std::uint64_t seed = argc > 8 ? std::strtoull(argv[8], nullptr, 10) : 1;

@@ -3,7 +3,7 @@
 // frame by frame over each hold (two_touch.h). Prints a markdown report.
 //
 //   two_touch_eval SCENE PATCH SEED PAIRS SINGLES AREA [model=FILE] [misfit=X] [margin=MM] [link=MM rel=X floor=PM]
-//                  [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X]
+//                  [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X] [confirm=0|1]
 //
 // model: another model file than the scene's; misfit: its ResponseMap's multiple_misfit; margin:
 // PipelineConfig::multi_margin_mm; link/rel/floor: the gratings' groups (models without a ResponseMap);
@@ -85,7 +85,7 @@ int main(int argc, char** argv) {
   if (argc < 7) {
     std::fprintf(stderr,
                  "usage: %s SCENE PATCH SEED PAIRS SINGLES AREA [model=FILE] [misfit=X] [margin=MM] [link=MM rel=X floor=PM]\n"
-                 "       [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X]\n"
+                 "       [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X] [confirm=0|1]\n"
                  "  AREA: whole | Y0:Y1:R0:R1\n",
                  argv[0]);
     return 2;
@@ -119,7 +119,8 @@ int main(int argc, char** argv) {
       }
       else if (k == "k") knobs.multi_force_k = std::stod(v);
       else if (k == "gain") knobs.multi_force_min_gain = std::stod(v);
-      else if (k == "multiple_k") multiple_k = std::stod(v);  // judge a flagged contact at force + k x sd (not shipped)
+      else if (k == "multiple_k") multiple_k = std::stod(v);
+      else if (k == "confirm") knobs.multi_confirm_anywhere = std::stoi(v) != 0;  // a flag needs no single touch anywhere  // judge a flagged contact at force + k x sd (not shipped)
       else throw std::runtime_error("unknown knob '" + k + "'");
     }
     v1::DecoderModel model = decode::LoadModel(model_path);
@@ -136,6 +137,7 @@ int main(int argc, char** argv) {
     rig.pipeline_config().multi_force_k = knobs.multi_force_k;
     rig.pipeline_config().multi_force_min_gain = knobs.multi_force_min_gain;
     rig.set_multiple_sd_k(multiple_k);
+    rig.pipeline_config().multi_confirm_anywhere = knobs.multi_confirm_anywhere;
     const decode::PipelineConfig& pc = rig.pipeline_config();
     const patch::PatchSpec& spec = scene.patches[patch].spec;
     const double mm_per_deg = testing::MmPerDeg(scene, patch);

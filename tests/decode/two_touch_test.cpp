@@ -333,6 +333,24 @@ TEST(TouchCheck, OneTouchPassesTwoAreFoundWithTheirForces) {
   EXPECT_NEAR(b.force_n, 1.5, 0.075);
 }
 
+// confirm_anywhere (review 14 finding 3; PipelineConfig::multi_confirm_anywhere, off by default): one touch whose
+// start lies beyond the 5 x 5 node window is flagged by the window alone, and is one touch when the best single
+// touch anywhere on the map is asked too; a pair stays flagged and found either way.
+TEST(TouchCheck, ConfirmAnywhereClearsAFlagOneTouchExplainsAndKeepsAPair) {
+  const decode::TouchCheck check(SyntheticMap(0.05));
+  const decode::ResponseModel& m = check.model();
+  const decode::ShiftsPm one = Shifts(m, {{40, 40, 2.0}});
+  const decode::TouchVerdict window = check.Check(one, 52, 52);  // 12 mm and 12 deg off: outside the window
+  ASSERT_TRUE(window.multiple) << "misfit " << window.misfit << ": the window should miss this touch";
+  const decode::TouchVerdict anywhere = check.Check(one, 52, 52, true, true);
+  EXPECT_FALSE(anywhere.multiple);
+  EXPECT_LT(anywhere.misfit, 0.01);
+  const decode::ShiftsPm two = Shifts(m, {{20, 20, 2.0}, {80, 70, 1.5}});
+  const decode::TouchVerdict pair = check.Check(two, 50, 45, true, true);
+  EXPECT_TRUE(pair.multiple);
+  EXPECT_EQ(pair.found, 2);
+}
+
 // A found pair's forces carry an sd; Amplitudes follows the forces at the pair's places frame by frame.
 TEST(TouchCheck, APairsForcesHaveAnSdAndFollowTheFrame) {
   const decode::TouchCheck check(SyntheticMap(0.05));

@@ -301,7 +301,7 @@ int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& 
   if (touches_ && touches_->limit() > 0 && out.located) {
     // The model's one-touch response: is this one touch? If not, the two-touch fit's places and total force.
     const bool refit = d.pair_age_ >= refit_frames_;
-    TouchVerdict v = touches_->Check(shift, out.y_mm, out.r_deg, refit);
+    TouchVerdict v = touches_->Check(shift, out.y_mm, out.r_deg, refit, config_.multi_confirm_anywhere);
     if (!v.multiple) {
       d.pair_age_ = 1 << 30;
       return 1;

@@ -119,7 +119,8 @@ double TouchCheck::Force(double amplitude) const noexcept {
   return disc > 0 ? (std::sqrt(disc) - 1.0) / (2.0 * c) : amplitude;
 }
 
-TouchVerdict TouchCheck::Check(const ShiftsPm& shift, double y_mm, double r_deg, bool fit_pair) const noexcept {
+TouchVerdict TouchCheck::Check(const ShiftsPm& shift, double y_mm, double r_deg, bool fit_pair,
+                               bool confirm_anywhere) const noexcept {
   TouchVerdict v;
   const Frame f = Prepare(shift);
   if (limit_ <= 0 || f.n < 4 || model_.g.empty()) return v;
@@ -130,6 +131,13 @@ TouchVerdict TouchCheck::Check(const ShiftsPm& shift, double y_mm, double r_deg,
   v.misfit = std::clamp(one.cost / energy, 0.0, 1.0);
   if (one.node >= 0) v.touch[0] = Place(one.node, one.a);
   if (v.misfit <= limit_) return v;
+  if (confirm_anywhere) {
+    const double anywhere = std::clamp(Unexplained(shift) / energy, 0.0, 1.0);
+    if (anywhere <= limit_) {
+      v.misfit = anywhere;
+      return v;
+    }
+  }
   v.multiple = true;
   if (!fit_pair) return v;
   // Two touches: start from the best single touch anywhere, then search each place with the other held

@@ -87,6 +87,9 @@ struct PipelineConfig {
   // While frames stay flagged, the two-touch fit (about 100 us) runs once every multi_refit_s; the frames in
   // between reuse its places. 0: every frame.
   double multi_refit_s = 0.01;
+  // TouchCheck::Check's confirm_anywhere: a flag stands only when no single touch anywhere on the map explains the
+  // frame either. Measured on validation and off (docs/experiments/pair.md, "Review 14").
+  bool multi_confirm_anywhere = false;
   // What a frame flagged `multiple` whose pair the response map explains reports as its force (the stop rule
   // compares it with the threshold; docs/decoders.md "Two touches"). The networks read a pair as one touch
   // they were never shown, sometimes below either touch. Each fitted touch counts at its lower bound,
