@@ -7,7 +7,9 @@
 //
 // model: another model file than the scene's; misfit: its ResponseMap's multiple_misfit; margin:
 // PipelineConfig::multi_margin_mm; link/rel/floor: the gratings' groups (models without a ResponseMap);
-// force/k/gain: PipelineConfig::multi_force, multi_force_k, multi_force_min_gain (what a found pair reports).
+// force/k/gain: PipelineConfig::multi_force, multi_force_k, multi_force_min_gain (what a found pair reports);
+// multiple_k: the stop table also stops a flagged contact whose force + k x sd crosses (measured, not shipped);
+// confirm: PipelineConfig::multi_confirm_anywhere (a flag only when no single touch anywhere explains the frame).
 // After the flag tables, a stop table: the same presses by force, then PAIRS light pairs and SINGLES light
 // singles (drawn after the others, so the flag tables do not move).
 //
@@ -120,7 +122,7 @@ int main(int argc, char** argv) {
       else if (k == "k") knobs.multi_force_k = std::stod(v);
       else if (k == "gain") knobs.multi_force_min_gain = std::stod(v);
       else if (k == "multiple_k") multiple_k = std::stod(v);
-      else if (k == "confirm") knobs.multi_confirm_anywhere = std::stoi(v) != 0;  // a flag needs no single touch anywhere  // judge a flagged contact at force + k x sd (not shipped)
+      else if (k == "confirm") knobs.multi_confirm_anywhere = std::stoi(v) != 0;
       else throw std::runtime_error("unknown knob '" + k + "'");
     }
     v1::DecoderModel model = decode::LoadModel(model_path);

@@ -1,8 +1,9 @@
 #!/bin/bash
-# Builds tests/review13/probe (out of the main build: its own object, linked to build/release's libraries as
-# two_touch_test is). Run from the repository root.
-set -e; R=build/release; O=tests/review13/out; mkdir -p $O
-[ $O/probe -nt tests/review13/probe.cpp ] && exit 0
+# Builds tests/review13/probe.cpp into OUT_DIR/probe (default tests/review13/out; review 14 uses its own), out of
+# the main build: its own object, linked to build/release's libraries as two_touch_test is. Rebuilt when the probe
+# or the unit tests' rig (tests/decode/hard_press.h) is newer. Run from the repository root: build_probe.sh [OUT_DIR]
+set -e; R=build/release; O=${1:-tests/review13/out}; mkdir -p $O
+[ $O/probe -nt tests/review13/probe.cpp ] && [ $O/probe -nt tests/decode/hard_press.h ] && exit 0
 c++ -DRUFFINI_HAS_OVER_RANGE=1 -I tests/decode -Ipatches/link/include -Ipatches/decode/include -Ipatches/core/include -I$R/proto \
   -Ipatches/ingest/include -Ipatches/twin/include -Ipatches/sim/include -Ipatches/dataset/include -Ipatches/robot/include \
   -isystem /usr/include/eigen3 -O2 -DNDEBUG -std=c++20 -o $O/probe tests/review13/probe.cpp \
