@@ -300,6 +300,8 @@ struct DecoderService::Impl {
   Wavelengths rest_nm{};
   std::uint64_t rest_version = 0;
   std::int64_t next_rest_ns = 0;
+  std::uint64_t refusals_logged = 0;  // refused start-up captures already said in the log (decode thread)
+  std::int64_t next_refusal_log_ns = 0;
   std::thread rest_thread;
   std::mutex rest_wake_mutex;
   std::condition_variable rest_wake;
@@ -343,9 +345,21 @@ void DecoderService::Impl::CopyStats() {
   for (std::size_t i = 0; i < monitor->retares().size(); ++i) st(stats.retares[i], monitor->retares()[i]);
   stats.drift_pm.store(h.drift_pm, std::memory_order_relaxed);
   stats.common_mode_pm.store(h.common_mode_pm, std::memory_order_relaxed);
-  st(stats.captures_refused, pipeline->baseline().captures_refused());
-  // The rest baseline, once a second while healthy, tracking and out of contact (the writer takes it).
+  const std::uint64_t refused = pipeline->baseline().captures_refused();
+  st(stats.captures_refused, refused);
   const std::int64_t mono = service::MonoNowNs();
+  // A refused start-up capture is counted (the metric) and said in the log, at most every 10 s: the patch stays in
+  // FAULT, and the operator needs the reason and the way out.
+  if (refused > refusals_logged && mono >= next_refusal_log_ns) {
+    spdlog::warn("start-up capture refused ({} so far; the last differed from the rest file's baseline by up to {:.1f} "
+                 "pm, common mode removed, or the networks read the difference as a contact): the patch stays in FAULT "
+                 "until a capture matches its rest. If nothing presses the skin, the rest is out of date (a temperature "
+                 "change): with the robot stopped, remove {} and restart the decoder to trust a new capture",
+                 refused, pipeline->baseline().refused_residual_pm(), config.rest_file);
+    refusals_logged = refused;
+    next_refusal_log_ns = mono + 10'000'000'000;
+  }
+  // The rest baseline, once a second while healthy, tracking and out of contact (the writer takes it).
   if (!config.rest_file.empty() && mono >= next_rest_ns && h.healthy && !h.in_contact &&
       h.baseline == link::BaselineState::kTracking) {
     std::unique_lock lock(rest_mutex, std::try_to_lock);

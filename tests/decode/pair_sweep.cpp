@@ -37,6 +37,7 @@ int main(int argc, char** argv) try {
   const v1::DecoderModel model = decode::LoadModel(scene.patches[p].model_path);
   testing::HardPressRig rig(scene, p, model);
   if (argc > 9 && std::string(argv[9]) == "confirm") rig.pipeline_config().multi_confirm_anywhere = true;
+  if (const char* w = std::getenv("PAIR_SWEEP_WINDOW")) rig.pipeline_config().multi_window_nodes = std::atoi(w);
   const double y = std::atof(argv[3]), r = std::atof(argv[4]), f = std::atof(argv[5]), fl = std::atof(argv[6]);
   const double threshold = argc > 7 ? std::atof(argv[7]) : 1.5;
   const std::uint64_t seed = argc > 8 ? std::strtoull(argv[8], nullptr, 10) : 1;

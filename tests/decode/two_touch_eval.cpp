@@ -3,13 +3,14 @@
 // frame by frame over each hold (two_touch.h). Prints a markdown report.
 //
 //   two_touch_eval SCENE PATCH SEED PAIRS SINGLES AREA [model=FILE] [misfit=X] [margin=MM] [link=MM rel=X floor=PM]
-//                  [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X] [confirm=0|1]
+//                  [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X] [confirm=0|1] [window=NODES]
 //
 // model: another model file than the scene's; misfit: its ResponseMap's multiple_misfit; margin:
 // PipelineConfig::multi_margin_mm; link/rel/floor: the gratings' groups (models without a ResponseMap);
 // force/k/gain: PipelineConfig::multi_force, multi_force_k, multi_force_min_gain (what a found pair reports);
 // multiple_k: the stop table also stops a flagged contact whose force + k x sd crosses (measured, not shipped);
-// confirm: PipelineConfig::multi_confirm_anywhere (a flag only when no single touch anywhere explains the frame).
+// confirm: PipelineConfig::multi_confirm_anywhere (a flag only when no single touch anywhere explains the frame);
+// window: PipelineConfig::multi_window_nodes (the single check's window, +- nodes; 2 as shipped).
 // After the flag tables, a stop table: the same presses by force, then PAIRS light pairs and SINGLES light
 // singles (drawn after the others, so the flag tables do not move).
 //
@@ -87,7 +88,7 @@ int main(int argc, char** argv) {
   if (argc < 7) {
     std::fprintf(stderr,
                  "usage: %s SCENE PATCH SEED PAIRS SINGLES AREA [model=FILE] [misfit=X] [margin=MM] [link=MM rel=X floor=PM]\n"
-                 "       [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X] [confirm=0|1]\n"
+                 "       [force=networks|largest|total k=X gain=PM_PER_N] [multiple_k=X] [confirm=0|1] [window=NODES]\n"
                  "  AREA: whole | Y0:Y1:R0:R1\n",
                  argv[0]);
     return 2;
@@ -123,6 +124,7 @@ int main(int argc, char** argv) {
       else if (k == "gain") knobs.multi_force_min_gain = std::stod(v);
       else if (k == "multiple_k") multiple_k = std::stod(v);
       else if (k == "confirm") knobs.multi_confirm_anywhere = std::stoi(v) != 0;
+      else if (k == "window") knobs.multi_window_nodes = std::stoi(v);
       else throw std::runtime_error("unknown knob '" + k + "'");
     }
     v1::DecoderModel model = decode::LoadModel(model_path);
@@ -140,6 +142,7 @@ int main(int argc, char** argv) {
     rig.pipeline_config().multi_force_min_gain = knobs.multi_force_min_gain;
     rig.set_multiple_sd_k(multiple_k);
     rig.pipeline_config().multi_confirm_anywhere = knobs.multi_confirm_anywhere;
+    rig.pipeline_config().multi_window_nodes = knobs.multi_window_nodes;
     const decode::PipelineConfig& pc = rig.pipeline_config();
     const patch::PatchSpec& spec = scene.patches[patch].spec;
     const double mm_per_deg = testing::MmPerDeg(scene, patch);

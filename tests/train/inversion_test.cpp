@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 
 #include "ruffini/decode/inversion.h"
 #include "ruffini/eval/evaluation.h"
@@ -45,6 +46,40 @@ struct Fixture {
 const Fixture& F() {
   static const Fixture f;
   return f;
+}
+
+// A map fitted over an area whose extent is not a whole number of 1.5 mm steps (the whole patch: 145 deg) ends on
+// the area's far edge, not past it (the pipeline refuses a map reaching beyond the patch: `fit-response --area
+// whole` once wrote such a map), and an area that is a whole number of steps (the indented area) keeps the step.
+TEST(InversionTest, TheMapsGridEndsOnTheAreasEdges) {
+  std::vector<decode::ShiftsPm> s;
+  std::vector<float> f, y, r;
+  for (int site = 0; site < 30; ++site) {
+    const float sy = static_cast<float>(5 + 4.5 * site), sr = static_cast<float>(3 + 4.6 * site);
+    for (int k = 1; k <= 10; ++k) {
+      decode::ShiftsPm v{};
+      for (std::size_t i = 0; i < 16; ++i) v[i] = 0.3f * static_cast<float>(k * (1 + (static_cast<int>(i) + site) % 5));
+      s.push_back(v);
+      f.push_back(0.3f * static_cast<float>(k));
+      y.push_back(sy);
+      r.push_back(sr);
+    }
+  }
+  const double radius = 37.36;
+  const double arc_step_deg = 1.5 * 180.0 / (std::numbers::pi * radius);
+  const patch::Region whole{0.0, 150.0, 0.0, 145.0};
+  const decode::ResponseModel m = decode::ResponseModel::Fit(s, f, y, r, whole, radius);
+  EXPECT_DOUBLE_EQ(m.y0_mm, 0.0);
+  EXPECT_DOUBLE_EQ(m.r0_deg, 0.0);
+  EXPECT_NEAR(m.y0_mm + (m.ny - 1) * m.dy_mm, 150.0, 1e-9);
+  EXPECT_NEAR(m.r0_deg + (m.nr - 1) * m.dr_deg, 145.0, 1e-9);
+  EXPECT_LE(m.dr_deg, arc_step_deg);  // never coarser than 1.5 mm of arc
+  EXPECT_GT(m.dr_deg, 0.98 * arc_step_deg);
+  const patch::Region exact{15.0, 135.0, 27.5, 27.5 + 40 * arc_step_deg};
+  const decode::ResponseModel e = decode::ResponseModel::Fit(s, f, y, r, exact, radius);
+  EXPECT_EQ(e.nr, 41);
+  EXPECT_DOUBLE_EQ(e.dr_deg, arc_step_deg);
+  EXPECT_EQ(e.dy_mm, 1.5);
 }
 
 TEST(InversionTest, LocatesSingleContacts) {

@@ -71,8 +71,17 @@ ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vect
   m.dr_deg = 1.5 * 180.0 / (std::numbers::pi * radius_mm);  // 1.5 mm of arc
   m.y0_mm = a.y_min_mm;
   m.r0_deg = a.r_min_deg;
-  m.ny = static_cast<int>(std::ceil((a.y_max_mm - a.y_min_mm) / m.dy_mm)) + 1;
-  m.nr = static_cast<int>(std::ceil((a.r_max_deg - a.r_min_deg) / m.dr_deg)) + 1;
+  // (A whole number of steps, up to rounding, is that many steps: 1e-6 of a step of slack.)
+  m.ny = static_cast<int>(std::ceil((a.y_max_mm - a.y_min_mm) / m.dy_mm - 1e-6)) + 1;
+  m.nr = static_cast<int>(std::ceil((a.r_max_deg - a.r_min_deg) / m.dr_deg - 1e-6)) + 1;
+  // The grid must end on the area's far edge, not beyond it (a map reaching past the patch is refused by the
+  // pipeline): where the extent is not a whole number of steps, the step shrinks to fit that many nodes. An
+  // extent that is a whole number of steps (the indented area) keeps its step, so those maps are unchanged.
+  const auto fit_step = [](double extent, int n, double& step) {
+    if (n > 1 && (n - 1) * step > extent + 1e-6 * step) step = extent / (n - 1);
+  };
+  fit_step(a.y_max_mm - a.y_min_mm, m.ny, m.dy_mm);
+  fit_step(a.r_max_deg - a.r_min_deg, m.nr, m.dr_deg);
   std::vector<double> curv;
   for (const auto& st : sites) {
     if (std::isfinite(st.curvature)) curv.push_back(st.curvature);

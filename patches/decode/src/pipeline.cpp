@@ -84,6 +84,9 @@ Pipeline<Scalar>::Pipeline(const v1::DecoderModel& m, const patch::PatchSpec& sp
         config_.multi_margin_mm < 1e4)) {
     throw InputError("pipeline: multi_rel must be in (0, 1], multi_floor_pm, multi_link_mm and multi_margin_mm >= 0");
   }
+  if (!(config_.multi_window_nodes >= 0 && config_.multi_window_nodes <= 20)) {
+    throw InputError("pipeline: multi_window_nodes must be 0..20 (the two-touch check's window, +- nodes)");
+  }
   if (m.has_response()) {
     touches_.emplace(m.response());
     // The map must lie on the patch (1 mm and 1 deg of slack): a map elsewhere would flag every frame and place
@@ -301,7 +304,8 @@ int Pipeline<Scalar>::Touches(const ShiftsPm& shift, PipelineOutput& out, Data& 
   if (touches_ && touches_->limit() > 0 && out.located) {
     // The model's one-touch response: is this one touch? If not, the two-touch fit's places and total force.
     const bool refit = d.pair_age_ >= refit_frames_;
-    TouchVerdict v = touches_->Check(shift, out.y_mm, out.r_deg, refit, config_.multi_confirm_anywhere);
+    TouchVerdict v = touches_->Check(shift, out.y_mm, out.r_deg, refit, config_.multi_confirm_anywhere,
+                                     config_.multi_window_nodes);
     if (!v.multiple) {
       d.pair_age_ = 1 << 30;
       return 1;

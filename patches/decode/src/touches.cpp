@@ -120,14 +120,15 @@ double TouchCheck::Force(double amplitude) const noexcept {
 }
 
 TouchVerdict TouchCheck::Check(const ShiftsPm& shift, double y_mm, double r_deg, bool fit_pair,
-                               bool confirm_anywhere) const noexcept {
+                               bool confirm_anywhere, int window_nodes) const noexcept {
   TouchVerdict v;
   const Frame f = Prepare(shift);
   if (limit_ <= 0 || f.n < 4 || model_.g.empty()) return v;
   const double energy = f.ss + f.n * kNoisePm * kNoisePm;
   const int cy = static_cast<int>(std::lround((y_mm - model_.y0_mm) / model_.dy_mm));
   const int cr = static_cast<int>(std::lround((r_deg - model_.r0_deg) / model_.dr_deg));
-  const Best one = SearchOne(shift, cy - kWindow, cy + kWindow, cr - kWindow, cr + kWindow, 1);
+  const int w = std::max(0, window_nodes);
+  const Best one = SearchOne(shift, cy - w, cy + w, cr - w, cr + w, 1);
   v.misfit = std::clamp(one.cost / energy, 0.0, 1.0);
   if (one.node >= 0) v.touch[0] = Place(one.node, one.a);
   if (v.misfit <= limit_) return v;

@@ -90,6 +90,8 @@ struct PipelineConfig {
   // TouchCheck::Check's confirm_anywhere: a flag stands only when no single touch anywhere on the map explains the
   // frame either. Measured on validation and off (docs/experiments/pair.md, "Review 14").
   bool multi_confirm_anywhere = false;
+  // TouchCheck::Check's window around the networks' place, +- nodes of the response map (2: +-3 mm).
+  int multi_window_nodes = 2;
   // What a frame flagged `multiple` whose pair the response map explains reports as its force (the stop rule
   // compares it with the threshold; docs/decoders.md "Two touches"). The networks read a pair as one touch
   // they were never shown, sometimes below either touch. Each fitted touch counts at its lower bound,

@@ -52,8 +52,10 @@ class TouchCheck {
   // confirm_anywhere: a frame the window flags is one touch after all when the best single touch anywhere on the
   // map (Unexplained, about 10 us, flagged frames only) leaves at most the limit's misfit (review 14 finding 3:
   // a single touch the networks place a few mm off is flagged by the window; measured, off by default).
+  // window_nodes: the single check's window, +- that many nodes around (y_mm, r_deg) (2: +-3 mm at the fit's 1.5 mm).
   TouchVerdict Check(const ShiftsPm& shift_pm, double y_mm, double r_deg, bool fit_pair = true,
-                     bool confirm_anywhere = false) const noexcept;
+                     bool confirm_anywhere = false, int window_nodes = kDefaultWindow) const noexcept;
+  static constexpr int kDefaultWindow = 2;
   // A found pair's forces (and sds) re-solved on this frame's shifts at the pair's places: the frames between
   // two fits follow the touches' forces (a 2 x 2 least squares, well under a microsecond). A pair that no
   // longer fits with both amplitudes >= 0 keeps found 2 with the force of the touch that went negative 0.
