@@ -3,6 +3,7 @@
 #include <grpcpp/grpcpp.h>
 #include <pthread.h>
 #include <prometheus/exposer.h>
+#include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -300,8 +301,8 @@ struct DecoderService::Impl {
   Wavelengths rest_nm{};
   std::uint64_t rest_version = 0;
   std::int64_t next_rest_ns = 0;
-  std::uint64_t refusals_logged = 0;  // refused start-up captures already said in the log (decode thread)
-  std::int64_t next_refusal_log_ns = 0;
+  std::atomic<float> refused_residual_pm{0.0f};  // the last refused start-up capture's residual (decode thread)
+  float rest_tolerance_pm = 0.0f;                 // the pipeline's, for the log
   std::thread rest_thread;
   std::mutex rest_wake_mutex;
   std::condition_variable rest_wake;
@@ -345,21 +346,11 @@ void DecoderService::Impl::CopyStats() {
   for (std::size_t i = 0; i < monitor->retares().size(); ++i) st(stats.retares[i], monitor->retares()[i]);
   stats.drift_pm.store(h.drift_pm, std::memory_order_relaxed);
   stats.common_mode_pm.store(h.common_mode_pm, std::memory_order_relaxed);
-  const std::uint64_t refused = pipeline->baseline().captures_refused();
-  st(stats.captures_refused, refused);
-  const std::int64_t mono = service::MonoNowNs();
-  // A refused start-up capture is counted (the metric) and said in the log, at most every 10 s: the patch stays in
-  // FAULT, and the operator needs the reason and the way out.
-  if (refused > refusals_logged && mono >= next_refusal_log_ns) {
-    spdlog::warn("start-up capture refused ({} so far; the last differed from the rest file's baseline by up to {:.1f} "
-                 "pm, common mode removed, or the networks read the difference as a contact): the patch stays in FAULT "
-                 "until a capture matches its rest. If nothing presses the skin, the rest is out of date (a temperature "
-                 "change): with the robot stopped, remove {} and restart the decoder to trust a new capture",
-                 refused, pipeline->baseline().refused_residual_pm(), config.rest_file);
-    refusals_logged = refused;
-    next_refusal_log_ns = mono + 10'000'000'000;
-  }
+  // The residual first: the rest writer reads the count (release) and then the residual of that refusal or a later one.
+  refused_residual_pm.store(pipeline->baseline().refused_residual_pm(), std::memory_order_relaxed);
+  stats.captures_refused.store(pipeline->baseline().captures_refused(), std::memory_order_release);
   // The rest baseline, once a second while healthy, tracking and out of contact (the writer takes it).
+  const std::int64_t mono = service::MonoNowNs();
   if (!config.rest_file.empty() && mono >= next_rest_ns && h.healthy && !h.in_contact &&
       h.baseline == link::BaselineState::kTracking) {
     std::unique_lock lock(rest_mutex, std::try_to_lock);
@@ -374,10 +365,34 @@ void DecoderService::Impl::CopyStats() {
 // Writes the rest baseline every 5 s when it is new: to FILE.tmp, then renamed over FILE (a reader sees the old
 // file or the new one, never half of one).
 void DecoderService::Impl::RestLoop() {
-  std::uint64_t written = 0;
+  std::uint64_t written = 0, refusals_logged = 0;
+  std::int64_t next_refusal_log_ns = 0;
   std::unique_lock wake(rest_wake_mutex);
   while (!stop_rest) {
     rest_wake.wait_for(wake, std::chrono::seconds(5), [&] { return stop_rest; });
+    // A refused start-up capture is counted (the metric) and said here, off the decode thread, at most every 10 s:
+    // the patch stays in FAULT, and the operator needs to know which check refused it. No way round the check is
+    // offered: without the rest file the next capture is trusted unchecked, a held press included (review 15).
+    const std::uint64_t refused = stats.captures_refused.load(std::memory_order_acquire);
+    const std::int64_t mono = service::MonoNowNs();
+    if (refused > refusals_logged && mono >= next_refusal_log_ns) {
+      const float residual = refused_residual_pm.load(std::memory_order_relaxed);
+      const std::string why =
+          !std::isfinite(residual) ? std::string("its difference from the rest cannot be computed (too few gratings present)")
+          : residual <= rest_tolerance_pm
+              ? fmt::format("it lies within {:.1f} pm of the rest (tolerance {:.1f} pm), but the networks read the "
+                            "difference as a contact, or it is outside the model's input range",
+                            residual, rest_tolerance_pm)
+              : fmt::format("it differs from the rest by up to {:.1f} pm on a grating (tolerance {:.1f} pm; common mode "
+                            "removed)",
+                            residual, rest_tolerance_pm);
+      spdlog::warn("start-up capture refused ({} so far): {}. The patch stays in FAULT until a capture matches its "
+                   "rest: something may be pressing the skin, or the rest is out of date (a temperature change). "
+                   "Starting without {} would trust the next capture unchecked, a held press included",
+                   refused, why, config.rest_file);
+      refusals_logged = refused;
+      next_refusal_log_ns = mono + 10'000'000'000;
+    }
     Wavelengths nm{};
     std::uint64_t version = 0;
     {
@@ -704,6 +719,7 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
     if (std::filesystem::exists(s.config.rest_file)) {
       const RestFile rest = ReadRestFile(s.config.rest_file, s.patch_id, s.patch->spec);
       s.pipeline_config.baseline.rest_nm = rest.wavelength_nm;
+      s.rest_tolerance_pm = static_cast<float>(s.pipeline_config.baseline.rest_tolerance_pm);
       spdlog::info("rest file {}: the start-up capture must match the rest of {} s ago within {} pm (common mode removed)",
                    s.config.rest_file, std::max<std::int64_t>(0, UnixNowS() - rest.unix_s),
                    s.pipeline_config.baseline.rest_tolerance_pm);

@@ -7,13 +7,16 @@
 // count of placements without a stop.
 //
 //   pair_sweep SCENE PATCH Y_MM R_DEG FORCE_N LIGHT_N [THRESHOLD_N=1.5] [SEED=1] [confirm]
-// (confirm: PipelineConfig::multi_confirm_anywhere on, a flag only when no single touch anywhere explains the frame)
+// (confirm: PipelineConfig::multi_confirm_anywhere on, a flag only when no single touch anywhere explains the frame;
+// the environment's PAIR_SWEEP_WINDOW=N sets PipelineConfig::multi_window_nodes, the single check's window)
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
 #include <numbers>
 #include <span>
+#include <stdexcept>
 #include <string>
 
 #include "hard_press.h"
@@ -37,7 +40,14 @@ int main(int argc, char** argv) try {
   const v1::DecoderModel model = decode::LoadModel(scene.patches[p].model_path);
   testing::HardPressRig rig(scene, p, model);
   if (argc > 9 && std::string(argv[9]) == "confirm") rig.pipeline_config().multi_confirm_anywhere = true;
-  if (const char* w = std::getenv("PAIR_SWEEP_WINDOW")) rig.pipeline_config().multi_window_nodes = std::atoi(w);
+  // PipelineConfig::multi_window_nodes, for measuring (docs/experiments/pair.md section 4); the pipeline refuses
+  // values outside 0..20 (+-20 nodes costs about 50 us per in-contact frame: review 15).
+  if (const char* w = std::getenv("PAIR_SWEEP_WINDOW")) {
+    char* end = nullptr;
+    const long v = std::strtol(w, &end, 10);
+    if (end == w || *end != '\0') throw std::runtime_error(std::string("PAIR_SWEEP_WINDOW: not a whole number: '") + w + "'");
+    rig.pipeline_config().multi_window_nodes = static_cast<int>(std::clamp(v, -1L, 1000L));
+  }
   const double y = std::atof(argv[3]), r = std::atof(argv[4]), f = std::atof(argv[5]), fl = std::atof(argv[6]);
   const double threshold = argc > 7 ? std::atof(argv[7]) : 1.5;
   const std::uint64_t seed = argc > 8 ? std::strtoull(argv[8], nullptr, 10) : 1;

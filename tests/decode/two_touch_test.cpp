@@ -179,28 +179,30 @@ TEST(TwoTouches, DISABLED_ALightTouchHidesFiveNewtonsAtACoveredCorner) {
 }
 
 // Why the corner above stays open (docs/experiments/pair.md, section 4): at the wrist end the gratings see 5 N at the
-// covered corner Y 119.5 R 23.5 almost exactly as they see 0.75 N at Y 117.5 R 47, 24 deg inward (3 N there as 0.5 N
-// at Y 116 R 48.5), and 5 N at R 122 as 0.75 N at Y 119 R 101. Noise-free (the twin's strain, the common mode removed as the decoder removes it), the two
-// presses' shifts differ by at most twice the interrogator's noise energy (16 gratings x (0.3 pm)^2 = 1.44 pm^2).
-// No decoder of these shifts can keep the corner press's stop under a second touch without stopping the light
-// press inward (the shipped one stops both when alone). If this fails, the twin or the fibre changed: measure
-// pair.md again.
+// covered corner Y 119.5 R 23.5 almost as they see 0.75 N at Y 117.5 R 47, 24 deg inward (3 N there almost as 0.5 N at
+// Y 116 R 48.5), and 5 N at R 122 almost as 0.75 N at Y 119 R 101. Noise-free (the twin's strain, the common mode
+// removed as the decoder removes it: the mean of the two middle shifts), the two presses' shifts differ by |d| of
+// 2-6 sigma of one grating's noise (0.3 pm) on one frame: a decoder would need a model of the corner accurate to well
+// under a picometre per grating to tell them apart, and the shipped one reads both at about 2 N. The corner press
+// alone must stop (it does). If the separation test fails, the twin or the fibre changed: measure pair.md again.
 TEST(TwoTouches, AWristEndCornerPressAndALightPressInwardMoveTheGratingsAlike) {
   const Shipped& s = Get();
   std::size_t patch = 0;
   while (s.scene.patches[patch].name != "upper_arm_a") ++patch;
-  const HardPressRig rig(s.scene, patch, decode::LoadModel(s.scene.patches[patch].model_path));
+  const v1::DecoderModel model = decode::LoadModel(s.scene.patches[patch].model_path);  // the rig keeps a reference
+  const HardPressRig rig(s.scene, patch, model);
   const auto shifts = [&](double y, double r, double f) {
     const std::vector<twin::Contact> c{twin::Contact{{y, r}, f, s.scene.probe}};
     twin::Shifts raw{};
     std::uint32_t flags = 0;
     rig.twin().StrainShiftsPm(c, raw, flags);
     std::vector<double> v(raw.begin(), raw.end()), sorted = v;
-    std::nth_element(sorted.begin(), sorted.begin() + 8, sorted.end());
-    for (double& x : v) x -= sorted[8];
+    std::sort(sorted.begin(), sorted.end());
+    const double median = 0.5 * (sorted[7] + sorted[8]);
+    for (double& x : v) x -= median;
     return v;
   };
-  constexpr double kNoiseEnergyPm2 = 16 * 0.3 * 0.3;
+  constexpr double kNoisePm = 0.3;
   struct LookAlike {
     double y, r, f, light_y, light_r, light_f;
   };
@@ -212,10 +214,26 @@ TEST(TwoTouches, AWristEndCornerPressAndALightPressInwardMoveTheGratingsAlike) {
       hh += hard[i] * hard[i];
       diff += (hard[i] - light[i]) * (hard[i] - light[i]);
     }
-    ASSERT_GT(hh, 10 * kNoiseEnergyPm2) << "the corner press must move the gratings well above the noise";
-    EXPECT_LT(diff, 2 * kNoiseEnergyPm2) << c.f << " N at Y " << c.y << " R " << c.r << " against " << c.light_f
-                                         << " N at Y " << c.light_y << " R " << c.light_r << " (" << hh << " pm^2)";
+    ASSERT_GT(std::sqrt(hh) / kNoisePm, 10.0) << "the corner press must move the gratings far above the noise";
+    EXPECT_LT(std::sqrt(diff) / kNoisePm, 6.0) << c.f << " N at Y " << c.y << " R " << c.r << " against " << c.light_f
+                                                << " N at Y " << c.light_y << " R " << c.light_r << " (" << hh << " pm^2)";
+    const ProbeAt hard_press{c.y, c.r, c.f};
+    EXPECT_TRUE(rig.Press(std::span<const ProbeAt>(&hard_press, 1), 1.5).stops()) << "the corner press alone must stop";
   }
+}
+
+// OPEN (docs/experiments/pair.md, section 4): the look-alike of the 5 N corner press above, 0.75 N at Y 117.5 R 47
+// (half the threshold, on the covered surface), alone reads 1.83-1.86 N and stops on every seed. Enable it when a
+// decoder tells the two apart (and keeps the corner press's stop).
+TEST(TwoTouches, DISABLED_ALightPressInwardOfTheWristEndCornerDoesNotStop) {
+  const Shipped& s = Get();
+  std::size_t patch = 0;
+  while (s.scene.patches[patch].name != "upper_arm_a") ++patch;
+  const v1::DecoderModel model = decode::LoadModel(s.scene.patches[patch].model_path);  // the rig keeps a reference
+  const HardPressRig rig(s.scene, patch, model);
+  const ProbeAt light{117.5, 47.0, 0.75};
+  const PressOutcome o = rig.Press(std::span<const ProbeAt>(&light, 1), 1.5);
+  EXPECT_FALSE(o.stops()) << "largest reported " << o.max_force_n << " N";
 }
 
 // Without a response map the gratings' groups still flag two touches on gratings far apart.

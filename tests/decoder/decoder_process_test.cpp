@@ -460,8 +460,12 @@ TEST_F(DecoderProcess, ARestartUnderAHeldPressIsNotTakenForTheRest) {
   })) << "the decoder without the file reports the held press (then this test no longer shows the hazard)";
   EXPECT_NE(b.process.stderr_text().find("the start-up capture must match the rest"), std::string::npos)
       << b.process.stderr_text();
-  // Each refusal is counted and said, with the way out (at most every 10 s: the first one at least).
-  EXPECT_NE(b.process.stderr_text().find("start-up capture refused ("), std::string::npos) << b.process.stderr_text();
+  // Each refusal is counted and said (off the decode thread, at most every 10 s: the first one at least, within the
+  // rest writer's 5 s wake), naming the check, and offering no way round it.
+  EXPECT_TRUE(rt::WaitFor([&] { return b.process.stderr_text().find("start-up capture refused (") != std::string::npos; }, 12s))
+      << b.process.stderr_text();
+  EXPECT_NE(b.process.stderr_text().find("would trust the next capture unchecked, a held press included"), std::string::npos)
+      << b.process.stderr_text();
   // Lifted (23.5 s): the rest again, captured, healthy.
   ASSERT_TRUE(rt::WaitFor([&] { return Metric(Scrape(b.metrics_port), healthy) == 1.0; }, 25s)) << b.process.stderr_text();
   EXPECT_EQ(b.process.Stop(), 0);

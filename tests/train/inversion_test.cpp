@@ -48,10 +48,12 @@ const Fixture& F() {
   return f;
 }
 
-// A map fitted over an area whose extent is not a whole number of 1.5 mm steps (the whole patch: 145 deg) ends on
-// the area's far edge, not past it (the pipeline refuses a map reaching beyond the patch: `fit-response --area
-// whole` once wrote such a map), and an area that is a whole number of steps (the indented area) keeps the step.
-TEST(InversionTest, TheMapsGridEndsOnTheAreasEdges) {
+// The map's grid steps 1.5 mm from the area's near corner and may end up to a step past its far edge (the indented
+// area's maps always have), but never past the patch: a map reaching beyond it is refused by the pipeline, and
+// `fit-response --area whole` (the area is the patch, 145 deg, not a whole number of steps) once wrote one. Such a
+// grid is squeezed to end on the patch's edge; the indented area's grid keeps its 1.5 mm step (its maps refitted
+// come out as before).
+TEST(InversionTest, TheMapsGridNeverEndsPastThePatch) {
   std::vector<decode::ShiftsPm> s;
   std::vector<float> f, y, r;
   for (int site = 0; site < 30; ++site) {
@@ -67,19 +69,25 @@ TEST(InversionTest, TheMapsGridEndsOnTheAreasEdges) {
   }
   const double radius = 37.36;
   const double arc_step_deg = 1.5 * 180.0 / (std::numbers::pi * radius);
-  const patch::Region whole{0.0, 150.0, 0.0, 145.0};
-  const decode::ResponseModel m = decode::ResponseModel::Fit(s, f, y, r, whole, radius);
+  const patch::Region patch{0.0, 150.0, 0.0, 145.0};
+  const decode::ResponseModel m = decode::ResponseModel::Fit(s, f, y, r, patch, radius, 0.1, &patch);
   EXPECT_DOUBLE_EQ(m.y0_mm, 0.0);
   EXPECT_DOUBLE_EQ(m.r0_deg, 0.0);
   EXPECT_NEAR(m.y0_mm + (m.ny - 1) * m.dy_mm, 150.0, 1e-9);
   EXPECT_NEAR(m.r0_deg + (m.nr - 1) * m.dr_deg, 145.0, 1e-9);
   EXPECT_LE(m.dr_deg, arc_step_deg);  // never coarser than 1.5 mm of arc
   EXPECT_GT(m.dr_deg, 0.98 * arc_step_deg);
-  const patch::Region exact{15.0, 135.0, 27.5, 27.5 + 40 * arc_step_deg};
-  const decode::ResponseModel e = decode::ResponseModel::Fit(s, f, y, r, exact, radius);
-  EXPECT_EQ(e.nr, 41);
+  // Without the patch to stay within, the same grid runs past it (what the fix prevents).
+  const decode::ResponseModel loose = decode::ResponseModel::Fit(s, f, y, r, patch, radius);
+  EXPECT_GT(loose.r0_deg + (loose.nr - 1) * loose.dr_deg, 145.0 + 1.0);
+  // The indented area (90 deg: 39.2 steps) keeps its step and its grid, up to a step past its edge.
+  const patch::Region indented{15.0, 135.0, 27.5, 117.5};
+  const decode::ResponseModel e = decode::ResponseModel::Fit(s, f, y, r, indented, radius, 0.1, &patch);
   EXPECT_DOUBLE_EQ(e.dr_deg, arc_step_deg);
-  EXPECT_EQ(e.dy_mm, 1.5);
+  EXPECT_DOUBLE_EQ(e.dy_mm, 1.5);
+  EXPECT_EQ(e.nr, 41);
+  EXPECT_EQ(e.ny, 81);
+  EXPECT_GT(e.r0_deg + (e.nr - 1) * e.dr_deg, 117.5);
 }
 
 TEST(InversionTest, LocatesSingleContacts) {

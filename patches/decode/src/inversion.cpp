@@ -13,7 +13,7 @@ namespace ruffini::decode {
 
 ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vector<float>& force,
                                  const std::vector<float>& y, const std::vector<float>& r, const patch::Region& a,
-                                 double radius_mm, double min_force_n) {
+                                 double radius_mm, double min_force_n, const patch::Region* within) {
   // 1. Sites: consecutive frames at one probe position (an indentation). At each site, least squares of
   //    every grating's shift on (F, F^2) gives its sensitivity g = slope at small force and the curvature.
   struct Site {
@@ -74,14 +74,17 @@ ResponseModel ResponseModel::Fit(const std::vector<ShiftsPm>& s, const std::vect
   // (A whole number of steps, up to rounding, is that many steps: 1e-6 of a step of slack.)
   m.ny = static_cast<int>(std::ceil((a.y_max_mm - a.y_min_mm) / m.dy_mm - 1e-6)) + 1;
   m.nr = static_cast<int>(std::ceil((a.r_max_deg - a.r_min_deg) / m.dr_deg - 1e-6)) + 1;
-  // The grid must end on the area's far edge, not beyond it (a map reaching past the patch is refused by the
-  // pipeline): where the extent is not a whole number of steps, the step shrinks to fit that many nodes. An
-  // extent that is a whole number of steps (the indented area) keeps its step, so those maps are unchanged.
-  const auto fit_step = [](double extent, int n, double& step) {
-    if (n > 1 && (n - 1) * step > extent + 1e-6 * step) step = extent / (n - 1);
-  };
-  fit_step(a.y_max_mm - a.y_min_mm, m.ny, m.dy_mm);
-  fit_step(a.r_max_deg - a.r_min_deg, m.nr, m.dr_deg);
+  // The last node lies on or up to a step past the area's far edge (the grid has always been laid out so; the
+  // indented area's maps keep it), but never past `within` (the patch: a map reaching beyond it is refused by the
+  // pipeline). A grid that would is squeezed to end on `within`'s edge: the step shrinks to fit that many nodes
+  // (`fit-response --area whole`, whose area is the patch, once wrote a map the decoders refused).
+  if (within != nullptr) {
+    const auto fit_step = [](double start, double end, int n, double& step) {
+      if (n > 1 && start + (n - 1) * step > end + 1e-6 * step) step = (end - start) / (n - 1);
+    };
+    fit_step(m.y0_mm, within->y_max_mm, m.ny, m.dy_mm);
+    fit_step(m.r0_deg, within->r_max_deg, m.nr, m.dr_deg);
+  }
   std::vector<double> curv;
   for (const auto& st : sites) {
     if (std::isfinite(st.curvature)) curv.push_back(st.curvature);

@@ -60,7 +60,9 @@ decode::ResponseModel FitResponse(const Prepared& p, const patch::PatchSpec& spe
     y.push_back(p.y_mm[k]);
     r.push_back(p.r_deg[k]);
   }
-  return decode::ResponseModel::Fit(s, f, y, r, area != nullptr ? *area : spec.indented_area, spec.surface_radius_mm);
+  const patch::Region patch_extent = spec.Extent();
+  return decode::ResponseModel::Fit(s, f, y, r, area != nullptr ? *area : spec.indented_area, spec.surface_radius_mm, 0.1,
+                                    &patch_extent);
 }
 
 Predictions RunDecoder(FrameDecoder& dec, const Prepared& p, const std::vector<std::int32_t>& test_ids,

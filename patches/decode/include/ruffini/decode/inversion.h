@@ -28,10 +28,13 @@ struct ResponseModel {
   double surface_radius_mm = 37.4;
 
   // Fits the model to frames (shifts, force labels, positions) above min_force_n. Nodes without data take
-  // their neighbours' values. Throws InputError when there are no usable frames.
+  // their neighbours' values. The grid (1.5 mm steps from the area's near corner) may end up to a step past the
+  // area's far edge, never past `within` (the patch; nullptr: no limit). Throws InputError when there are no
+  // usable frames.
   static ResponseModel Fit(const std::vector<ShiftsPm>& shift_pm, const std::vector<float>& force_n,
                            const std::vector<float>& y_mm, const std::vector<float>& r_deg,
-                           const patch::Region& area, double surface_radius_mm, double min_force_n = 0.1);
+                           const patch::Region& area, double surface_radius_mm, double min_force_n = 0.1,
+                           const patch::Region* within = nullptr);
   // g and its derivatives d/dY, d/dR at a point (clamped to the grid). No allocation.
   void Eval(double y_mm, double r_deg, std::array<double, kGratings>& out, std::array<double, kGratings>* dg_dy = nullptr,
             std::array<double, kGratings>* dg_dr = nullptr) const noexcept;
