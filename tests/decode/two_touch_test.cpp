@@ -236,6 +236,31 @@ TEST(TwoTouches, DISABLED_ALightPressInwardOfTheWristEndCornerDoesNotStop) {
   EXPECT_FALSE(o.stops()) << "largest reported " << o.max_force_n << " N";
 }
 
+// The pipeline hands PipelineConfig::multi_window_nodes to the check (review 15 finding 7): review 14's single 0.5 N
+// touch at Y 100 R 85, which the networks place a few mm off, is flagged on many hold frames with the shipped window
+// (+-2 nodes: 216 of 500 on the default seed) and on far fewer with +-8.
+TEST(TwoTouches, ThePipelineUsesTheCheckWindowItIsGiven) {
+  const Shipped& s = Get();
+  std::size_t patch = 0;
+  while (s.scene.patches[patch].name != "upper_arm_a") ++patch;
+  const v1::DecoderModel model = decode::LoadModel(s.scene.patches[patch].model_path);  // the rig keeps a reference
+  const ProbeAt light{100.0, 85.0, 0.5};
+  const auto flagged = [&](int window) {
+    HardPressRig rig(s.scene, patch, model);
+    rig.pipeline_config().multi_window_nodes = window;
+    const PressOutcome o = rig.Press(std::span<const ProbeAt>(&light, 1), 1.5);
+    std::size_t n = 0;
+    for (const auto& c : o.hold) n += c.multiple ? 1 : 0;
+    return std::pair<std::size_t, std::size_t>{n, o.hold.size()};
+  };
+  const auto [shipped, frames] = flagged(2);
+  const auto [wide, frames_wide] = flagged(8);
+  ASSERT_GT(frames, 100u);
+  EXPECT_GT(shipped, frames / 4) << "the shipped window should flag this touch on many hold frames";
+  EXPECT_LT(wide, shipped / 2) << wide << " of " << frames_wide << " flagged with +-8, " << shipped << " of " << frames
+                               << " with +-2";
+}
+
 // Without a response map the gratings' groups still flag two touches on gratings far apart.
 TEST(TwoTouches, WithoutAResponseMapTheGratingsGroupsFlagThem) {
   const Shipped& s = Get();
