@@ -302,7 +302,6 @@ struct DecoderService::Impl {
   std::uint64_t rest_version = 0;
   std::int64_t next_rest_ns = 0;
   std::atomic<float> refused_residual_pm{0.0f};  // the last refused start-up capture's residual (decode thread)
-  float rest_tolerance_pm = 0.0f;                 // the pipeline's, for the log
   std::thread rest_thread;
   std::mutex rest_wake_mutex;
   std::condition_variable rest_wake;
@@ -377,15 +376,16 @@ void DecoderService::Impl::RestLoop() {
     const std::int64_t mono = service::MonoNowNs();
     if (refused > refusals_logged && mono >= next_refusal_log_ns) {
       const float residual = refused_residual_pm.load(std::memory_order_relaxed);
+      const double tolerance = pipeline_config.baseline.rest_tolerance_pm;
       const std::string why =
           !std::isfinite(residual) ? std::string("its difference from the rest cannot be computed (too few gratings present)")
-          : residual <= rest_tolerance_pm
+          : residual <= tolerance
               ? fmt::format("it lies within {:.1f} pm of the rest (tolerance {:.1f} pm), but the networks read the "
                             "difference as a contact, or it is outside the model's input range",
-                            residual, rest_tolerance_pm)
+                            residual, tolerance)
               : fmt::format("it differs from the rest by up to {:.1f} pm on a grating (tolerance {:.1f} pm; common mode "
                             "removed)",
-                            residual, rest_tolerance_pm);
+                            residual, tolerance);
       spdlog::warn("start-up capture refused ({} so far): {}. The patch stays in FAULT until a capture matches its "
                    "rest: something may be pressing the skin, or the rest is out of date (a temperature change). "
                    "Starting without {} would trust the next capture unchecked, a held press included",
@@ -719,7 +719,6 @@ DecoderService::DecoderService(ServiceConfig config) : impl_(std::make_unique<Im
     if (std::filesystem::exists(s.config.rest_file)) {
       const RestFile rest = ReadRestFile(s.config.rest_file, s.patch_id, s.patch->spec);
       s.pipeline_config.baseline.rest_nm = rest.wavelength_nm;
-      s.rest_tolerance_pm = static_cast<float>(s.pipeline_config.baseline.rest_tolerance_pm);
       spdlog::info("rest file {}: the start-up capture must match the rest of {} s ago within {} pm (common mode removed)",
                    s.config.rest_file, std::max<std::int64_t>(0, UnixNowS() - rest.unix_s),
                    s.pipeline_config.baseline.rest_tolerance_pm);

@@ -13,8 +13,8 @@ namespace {
 // leave a light touch's shifts a few tenths of a pm from any model; 1 pm per grating keeps them from reading
 // as a misfit.
 constexpr double kNoisePm = 1.0;
-// The single check's window: +-2 nodes (+-3 mm at the fit's 1.5 mm) around the networks' place.
-constexpr int kWindow = 2;
+// The two-touch fit's refinement window (nodes), the single check's default: +-2 nodes (+-3 mm at the fit's 1.5 mm).
+constexpr int kWindow = TouchCheck::kDefaultWindow;
 // The two-touch fit's search stride over the map (nodes), then a +-kWindow refinement at full resolution.
 constexpr int kStride = 2;
 

@@ -91,7 +91,7 @@ struct PipelineConfig {
   // frame either. Measured on validation and off (docs/experiments/pair.md, "Review 14").
   bool multi_confirm_anywhere = false;
   // TouchCheck::Check's window around the networks' place, +- nodes of the response map (2: +-3 mm).
-  int multi_window_nodes = 2;
+  int multi_window_nodes = TouchCheck::kDefaultWindow;
   // What a frame flagged `multiple` whose pair the response map explains reports as its force (the stop rule
   // compares it with the threshold; docs/decoders.md "Two touches"). The networks read a pair as one touch
   // they were never shown, sometimes below either touch. Each fitted touch counts at its lower bound,
