@@ -5,7 +5,7 @@
 # random point of the same patch at least 30 mm away (seeds DeriveSeed(1103, point) and DeriveSeed(1104, point):
 # held out), and counts the hard presses on the covered surface that do not stop. The lab scene (cobot.yaml:
 # upper_arm_a's cobot-upper_arm.rmodel and forearm_a's file, both with the two-touch check since stop 33) and the
-# field scene (cobot-field.yaml, each cast its own model; its upper arms without the check).
+# field scene (cobot-field.yaml, each cast its own model; its upper arms with the check since stop 35).
 # Run from the repository root after `cmake --workflow --preset release`.
 # Usage: docs/experiments/pair.sh [BUILD_BIN_DIR] [OUT_DIR]   (about 9 min a patch on 2 idle cores)
 set -euo pipefail

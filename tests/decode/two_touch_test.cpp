@@ -162,6 +162,39 @@ TEST(TwoTouches, TheUpperArmsCheckKeepsAFiveNewtonStopALightTouchHidWithoutIt) {
                                 << " N): the test no longer shows the check's effect; pick another pair";
 }
 
+// Since stop 35 the field scene's upper arms (each its own cast and calibrated file) check for two touches as the
+// lab's do: the same response map (learned on the validation recording, cast 0) with the limit 0.07. The same pair as
+// above, on each field cast: with the check it stops, and the same file with the limit set to 0 (no check: what the
+// field files were until stop 35) reads 0.6-0.7 N (docs/experiments/pair.md, section 5).
+TEST(TwoTouches, TheFieldScenesUpperArmsCheckForTwoTouchesToo) {
+  const twin::Scene field = twin::LoadScene(RUFFINI_SOURCE_DIR "/config/scenes/cobot-field.yaml");
+  const ProbeAt hard{119.5, 23.5, 5.0}, light{130.0, 70.0, 0.4};
+  const ProbeAt two[2] = {hard, light};
+  int upper_arms = 0;
+  for (std::size_t patch = 0; patch < field.patches.size(); ++patch) {
+    if (field.patches[patch].name.rfind("upper_arm", 0) != 0) continue;
+    ++upper_arms;
+    SCOPED_TRACE(field.patches[patch].name);
+    const v1::DecoderModel checked = decode::LoadModel(field.patches[patch].model_path);
+    ASSERT_TRUE(checked.has_response()) << field.patches[patch].model_path;
+    EXPECT_DOUBLE_EQ(checked.response().multiple_misfit(), Get().model.response().multiple_misfit())
+        << "the field upper arms' limit is the lab files' (chosen on validation, docs/experiments/two-touches.md)";
+    v1::DecoderModel unchecked = checked;
+    unchecked.mutable_response()->set_multiple_misfit(0.0);
+    for (const v1::DecoderModel* m : std::initializer_list<const v1::DecoderModel*>{&checked, &unchecked}) {
+      HardPressRig rig(field, patch, *m);
+      ASSERT_TRUE(rig.Press(std::span<const ProbeAt>(&hard, 1), 1.5).stops()) << "the hard press alone must stop";
+      ASSERT_FALSE(rig.Press(std::span<const ProbeAt>(&light, 1), 1.5).stops()) << "the light touch alone must not stop";
+    }
+    const PressOutcome with_check = HardPressRig(field, patch, checked).Press(std::span<const ProbeAt>(two, 2), 1.5);
+    EXPECT_TRUE(with_check.stops()) << "largest reported " << with_check.max_force_n << " N";
+    const PressOutcome without = HardPressRig(field, patch, unchecked).Press(std::span<const ProbeAt>(two, 2), 1.5);
+    EXPECT_FALSE(without.stops()) << "without the check this pair now stops (" << without.max_force_n
+                                  << " N): the test no longer shows the check's effect; pick another pair";
+  }
+  EXPECT_EQ(upper_arms, 2);
+}
+
 // OPEN (review 10 finding 2, docs/experiments/pair.md): at the covered corner Y 119.5 R 23.5, 5 N alone stops;
 // with a 0.4 N touch held at Y 110 R 70 (alone: no stop) the upper arms' file (the check on) reads it at most 1.07 N,
 // every hold frame flagged `multiple`. The networks know one touch, and the response map sees a press there as a
