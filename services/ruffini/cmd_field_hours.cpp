@@ -30,6 +30,24 @@
 namespace ruffini::cli {
 namespace {
 
+// The report's name for each model (or scene) given: its file name (or stem) when that tells them apart, else the
+// path as given. The tables pool hours by this name, so two files named alike (old/m.rmodel, new/m.rmodel) once
+// pooled into one row of twice the hours, silently. The same path given twice is an error, not two columns.
+std::vector<std::string> ReportLabels(const std::vector<std::string>& paths, const char* option, bool stem) {
+  std::vector<std::string> labels;
+  for (const auto& p : paths) {
+    const std::filesystem::path fp(p);
+    labels.push_back(stem ? fp.stem().string() : fp.filename().string());
+  }
+  const auto unique = [](std::vector<std::string> v) {
+    std::sort(v.begin(), v.end());
+    return std::adjacent_find(v.begin(), v.end()) == v.end();
+  };
+  if (unique(labels)) return labels;
+  if (!unique(paths)) throw InputError(std::string(option) + ": the same file is given twice");
+  return paths;
+}
+
 // "901-910", "4,777-786": the seeds, in order, each once.
 std::vector<std::uint64_t> ParseSeeds(const std::string& text) {
   std::vector<std::uint64_t> out;
@@ -182,8 +200,11 @@ void RegisterFieldHours(CLI::App& app) {
   cmd->callback([a]() {
     const std::vector<std::uint64_t> seeds = ParseSeeds(a->seeds);
     std::vector<std::pair<std::string, v1::DecoderModel>> models;
-    for (const auto& m : a->models) {
-      models.emplace_back(std::filesystem::path(m).filename().string(), decode::LoadModel(m));
+    const std::vector<std::string> model_labels = ReportLabels(a->models, "--model", false);
+    const std::vector<std::string> scene_labels = ReportLabels(a->scenes, "--scene", true);
+    for (std::size_t i = 0; i < a->models.size(); ++i) {
+      const std::string& m = a->models[i];
+      models.emplace_back(model_labels[i], decode::LoadModel(m));
       if (a->gate_on_n > 0) {
         models.back().second.mutable_gating()->set_on_n(static_cast<float>(a->gate_on_n));
         models.back().second.mutable_gating()->set_off_n(static_cast<float>(0.8 * a->gate_on_n));
@@ -193,13 +214,14 @@ void RegisterFieldHours(CLI::App& app) {
     std::vector<Hour> hours;
     ProgressBar bar("field hours", a->scenes.size() * seeds.size());
     std::uint64_t done = 0;
-    for (const auto& scene_path : a->scenes) {
+    for (std::size_t si = 0; si < a->scenes.size(); ++si) {
+      const std::string& scene_path = a->scenes[si];
       const twin::Scene scene = twin::LoadScene(scene_path);
       const twin::ScenePatch& patch = scene.Patch(a->patch);  // throws when unknown, or when none is named of many
       const twin::SkinTwin twin(patch.spec, scene.EffectsOf(static_cast<std::size_t>(&patch - scene.patches.data())),
                                 {scene.probe.radius_mm});
       for (const auto& [label, m] : models) decode::CheckModelMatchesPatch(m, patch.spec, label);
-      const std::string scene_name = std::filesystem::path(scene_path).stem().string();
+      const std::string& scene_name = scene_labels[si];
       for (const std::uint64_t seed : seeds) {
         twin::FieldProtocol fp;
         fp.duration_s = a->duration_s;
