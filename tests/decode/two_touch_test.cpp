@@ -163,7 +163,7 @@ TEST(TwoTouches, TheUpperArmsCheckKeepsAFiveNewtonStopALightTouchHidWithoutIt) {
 }
 
 // Since stop 35 the field scene's upper arms (each its own cast and calibrated file) check for two touches as the
-// lab's do: the same response map (learned on the validation recording, cast 0) with the limit 0.07. The same pair as
+// lab's do: a response map refitted from the validation recording (cast 0) with the limit 0.07. The same pair as
 // above, on each field cast: with the check it stops, and the same file with the limit set to 0 (no check: what the
 // field files were until stop 35) reads 0.6-0.7 N (docs/experiments/pair.md, section 5).
 TEST(TwoTouches, TheFieldScenesUpperArmsCheckForTwoTouchesToo) {
